@@ -1,0 +1,146 @@
+//! Plain data types describing a point cloud: its header and chunks of its points.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// An axis-aligned box in world coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Bounds {
+    /// Smallest x, y, z.
+    pub min: [f64; 3],
+    /// Largest x, y, z.
+    pub max: [f64; 3],
+}
+
+impl Bounds {
+    /// The empty box: growing it by any point gives that point's box.
+    pub const EMPTY: Bounds = Bounds { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] };
+
+    /// True if no point was ever added.
+    pub fn is_empty(&self) -> bool {
+        self.min[0] > self.max[0]
+    }
+
+    /// Grows the box to hold `p`.
+    #[inline]
+    pub fn grow(&mut self, p: DVec3) {
+        let a = p.to_array();
+        for i in 0..3 {
+            self.min[i] = self.min[i].min(a[i]);
+            self.max[i] = self.max[i].max(a[i]);
+        }
+    }
+
+    /// Grows the box to hold `other`.
+    pub fn union(&mut self, other: &Bounds) {
+        for i in 0..3 {
+            self.min[i] = self.min[i].min(other.min[i]);
+            self.max[i] = self.max[i].max(other.max[i]);
+        }
+    }
+
+    /// Length of the diagonal (0 for an empty box).
+    pub fn diagonal(&self) -> f64 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        (DVec3::from(self.max) - DVec3::from(self.min)).length()
+    }
+
+    /// The box of a set of points.
+    pub fn of(points: impl IntoIterator<Item = DVec3>) -> Bounds {
+        let mut b = Bounds::EMPTY;
+        for p in points {
+            b.grow(p);
+        }
+        b
+    }
+}
+
+/// The coordinate reference system of a cloud, as stored in the file.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Crs {
+    /// OGC WKT, if the file carries one.
+    pub wkt: Option<String>,
+    /// EPSG code of the projected (or else geographic) CRS from GeoTIFF keys, if any.
+    pub epsg: Option<u16>,
+}
+
+impl Crs {
+    /// True if the file says nothing about its CRS.
+    pub fn is_unknown(&self) -> bool {
+        self.wkt.is_none() && self.epsg.is_none()
+    }
+
+    /// One-line description for humans.
+    pub fn summary(&self) -> String {
+        match (&self.epsg, &self.wkt) {
+            (Some(code), _) => format!("EPSG:{code}"),
+            (None, Some(wkt)) => {
+                // The name is the first quoted string of the WKT.
+                let name = wkt.split('"').nth(1).unwrap_or("WKT");
+                format!("WKT \"{name}\"")
+            }
+            (None, None) => "unknown".to_string(),
+        }
+    }
+}
+
+/// The file formats crease reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FileFormat {
+    /// Uncompressed ASPRS LAS.
+    Las,
+    /// LASzip-compressed LAS.
+    Laz,
+    /// Stanford PLY (ascii or binary).
+    Ply,
+}
+
+/// What a file's header says, read without touching the points.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CloudHeader {
+    /// The file.
+    pub path: PathBuf,
+    /// Its format.
+    pub format: FileFormat,
+    /// Format version, e.g. "1.4" for LAS or "binary_little_endian 1.0" for PLY.
+    pub version: String,
+    /// LAS point data record format (0-10); None for PLY.
+    pub point_format: Option<u8>,
+    /// Number of points the header declares.
+    pub count: u64,
+    /// Bounds the header declares (LAS), or bounds found by reading the points (PLY).
+    pub bounds: Bounds,
+    /// The CRS, if the file carries one.
+    pub crs: Crs,
+}
+
+/// A chunk of points in world coordinates, with their classification (0 if the format has none).
+#[derive(Clone, Debug, Default)]
+pub struct PointChunk {
+    /// Positions in world coordinates.
+    pub xyz: Vec<DVec3>,
+    /// ASPRS classification codes, one per point.
+    pub class: Vec<u8>,
+}
+
+impl PointChunk {
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.xyz.len()
+    }
+
+    /// True if the chunk holds no point.
+    pub fn is_empty(&self) -> bool {
+        self.xyz.is_empty()
+    }
+
+    /// Removes every point.
+    pub fn clear(&mut self) {
+        self.xyz.clear();
+        self.class.clear();
+    }
+}

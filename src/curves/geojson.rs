@@ -1,0 +1,45 @@
+//! GeoJSON output: one `LineString` feature per curve, with 3D coordinates in the input's own
+//! (usually projected) CRS. RFC 7946 assumes WGS 84; crease does not reproject, so it names the
+//! CRS with the 2008 GeoJSON `crs` member (EPSG code, understood by GDAL/QGIS) and also keeps
+//! the full WKT in a `crs_wkt` member when the input carries one.
+
+use super::Polyline;
+use crate::cloud::Crs;
+use crate::error::{Error, Result};
+use serde_json::{json, Value};
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+/// Writes `curves` to `path` as a GeoJSON FeatureCollection.
+pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
+    let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
+    let mut w = BufWriter::new(f);
+    let mut head = serde_json::Map::new();
+    head.insert("type".into(), json!("FeatureCollection"));
+    if let Some(code) = crs.epsg {
+        head.insert("crs".into(), json!({"type": "name", "properties": {"name": format!("urn:ogc:def:crs:EPSG::{code}")}}));
+    }
+    if let Some(wkt) = &crs.wkt {
+        head.insert("crs_wkt".into(), json!(wkt));
+    }
+    let features: Vec<Value> = curves
+        .iter()
+        .map(|c| {
+            let mut coords: Vec<[f64; 3]> = c.vertices.iter().map(|v| v.p.to_array()).collect();
+            if c.closed && !coords.is_empty() {
+                coords.push(coords[0]);
+            }
+            let corners: Vec<usize> = c.vertices.iter().enumerate().filter(|(_, v)| v.corner).map(|(i, _)| i).collect();
+            json!({
+                "type": "Feature",
+                "properties": {"id": c.id, "closed": c.closed, "length": c.length(), "corners": corners},
+                "geometry": {"type": "LineString", "coordinates": coords},
+            })
+        })
+        .collect();
+    head.insert("features".into(), Value::Array(features));
+    serde_json::to_writer(&mut w, &Value::Object(head))
+        .map_err(std::io::Error::from)
+        .and_then(|_| w.flush())
+        .map_err(|e| Error::output(path, e))
+}

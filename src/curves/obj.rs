@@ -1,0 +1,125 @@
+//! Wavefront OBJ polylines: `v x y z` vertices and `l i j k ...` lines, one `o` per curve.
+//! Corner vertices shared by several curves are written once and referenced by each.
+
+use super::{Polyline, Vertex};
+use crate::error::{io_input, Error, Result};
+use glam::DVec3;
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::path::Path;
+
+/// Writes `curves` to `path` as OBJ.
+pub fn write_obj(path: &Path, curves: &[Polyline]) -> Result<()> {
+    let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
+    let mut w = BufWriter::new(f);
+    write_obj_to(&mut w, curves).and_then(|_| w.flush()).map_err(|e| Error::output(path, e))
+}
+
+fn write_obj_to(w: &mut impl Write, curves: &[Polyline]) -> std::io::Result<()> {
+    writeln!(w, "# crease feature curves: {} polylines", curves.len())?;
+    // Vertex table; corners with identical positions are shared.
+    let mut corner_index: HashMap<[u64; 3], usize> = HashMap::new();
+    let mut lines: Vec<Vec<usize>> = Vec::with_capacity(curves.len());
+    let mut next = 1usize;
+    for c in curves {
+        let mut idx = Vec::with_capacity(c.vertices.len() + 1);
+        for v in &c.vertices {
+            let key = v.p.to_array().map(f64::to_bits);
+            let i = if v.corner {
+                if let Some(&i) = corner_index.get(&key) {
+                    i
+                } else {
+                    corner_index.insert(key, next);
+                    writeln!(w, "v {} {} {}", v.p.x, v.p.y, v.p.z)?;
+                    next += 1;
+                    next - 1
+                }
+            } else {
+                writeln!(w, "v {} {} {}", v.p.x, v.p.y, v.p.z)?;
+                next += 1;
+                next - 1
+            };
+            idx.push(i);
+        }
+        if c.closed && !idx.is_empty() {
+            idx.push(idx[0]);
+        }
+        lines.push(idx);
+    }
+    for (c, idx) in curves.iter().zip(&lines) {
+        writeln!(w, "o curve_{}", c.id)?;
+        write!(w, "l")?;
+        for i in idx {
+            write!(w, " {i}")?;
+        }
+        writeln!(w)?;
+    }
+    Ok(())
+}
+
+/// Reads the polylines of an OBJ file (`l` elements; `f` faces are ignored). A line whose
+/// last index repeats its first is closed. Curve ids come from `o curve_N` names when present,
+/// else from the order of the lines. Vertices used by two or more lines are marked as corners.
+pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
+    let f = std::fs::File::open(path).map_err(|e| io_input(path, e))?;
+    let mut verts: Vec<DVec3> = Vec::new();
+    let mut lines: Vec<(Option<u32>, Vec<usize>)> = Vec::new();
+    let mut pending_id: Option<u32> = None;
+    for (no, line) in BufReader::new(f).lines().enumerate() {
+        let line = line.map_err(|e| io_input(path, e))?;
+        let mut t = line.split_whitespace();
+        let bad = |m: &str| Error::input(path, format!("line {}: {m}", no + 1));
+        match t.next() {
+            Some("v") => {
+                let c: Vec<f64> = t.take(3).map(|s| s.parse::<f64>()).collect::<Result<_, _>>().map_err(|_| bad("bad vertex"))?;
+                if c.len() != 3 || c.iter().any(|x| !x.is_finite()) {
+                    return Err(bad("bad vertex"));
+                }
+                verts.push(DVec3::new(c[0], c[1], c[2]));
+            }
+            Some("o") | Some("g") => {
+                pending_id = t.next().and_then(|n| n.strip_prefix("curve_")).and_then(|s| s.parse().ok());
+            }
+            Some("l") => {
+                let mut idx = Vec::new();
+                for s in t {
+                    // "l" entries may be "v/vt"; only the vertex index matters.
+                    let first = s.split('/').next().unwrap_or("");
+                    let i: i64 = first.parse().map_err(|_| bad("bad line index"))?;
+                    let i = if i < 0 { verts.len() as i64 + i } else { i - 1 };
+                    if i < 0 {
+                        return Err(bad("line index out of range"));
+                    }
+                    idx.push(i as usize);
+                }
+                lines.push((pending_id.take(), idx));
+            }
+            _ => {}
+        }
+    }
+    let mut uses = vec![0u32; verts.len()];
+    for (_, idx) in &lines {
+        let n = idx.len();
+        let closed = n > 2 && idx[0] == idx[n - 1];
+        let end = if closed { n - 1 } else { n };
+        for &i in &idx[..end] {
+            if i >= verts.len() {
+                return Err(Error::input(path, format!("line refers to vertex {} of {}", i + 1, verts.len())));
+            }
+            uses[i] += 1;
+        }
+    }
+    let mut out = Vec::with_capacity(lines.len());
+    for (k, (id, mut idx)) in lines.into_iter().enumerate() {
+        let closed = idx.len() > 2 && idx[0] == idx[idx.len() - 1];
+        if closed {
+            idx.pop();
+        }
+        let vertices = idx
+            .iter()
+            .map(|&i| Vertex { corner: uses[i] > 1, ..Vertex::at(verts[i]) })
+            .collect();
+        out.push(Polyline { id: id.unwrap_or(k as u32), closed, vertices });
+    }
+    Ok(out)
+}

@@ -1,0 +1,110 @@
+//! Binary PLY polylines: a `vertex` element (x, y, z as double; the two surface normals as
+//! float; curve id; corner flag) and an `edge` element (vertex1, vertex2). Each curve's vertices
+//! are stored in order; a closed curve has one more edge than an open one.
+
+use super::{Polyline, Vertex};
+use crate::error::{io_input, Error, Result};
+use glam::{DVec3, Vec3};
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+const HEADER: &str = "property double x\nproperty double y\nproperty double z\n\
+property float n1x\nproperty float n1y\nproperty float n1z\n\
+property float n2x\nproperty float n2y\nproperty float n2z\n\
+property int curve\nproperty uchar corner\n";
+const VERTEX_BYTES: usize = 3 * 8 + 6 * 4 + 4 + 1;
+
+/// Writes `curves` to `path` as binary little-endian PLY.
+pub fn write_ply(path: &Path, curves: &[Polyline]) -> Result<()> {
+    let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
+    let mut w = BufWriter::new(f);
+    let nv: usize = curves.iter().map(|c| c.vertices.len()).sum();
+    let ne: usize = curves.iter().map(|c| c.segment_count()).sum();
+    let r = (|| -> std::io::Result<()> {
+        write!(
+            w,
+            "ply\nformat binary_little_endian 1.0\ncomment crease feature curves\n\
+             element vertex {nv}\n{HEADER}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n"
+        )?;
+        for c in curves {
+            for v in &c.vertices {
+                for x in v.p.to_array() {
+                    w.write_all(&x.to_le_bytes())?;
+                }
+                for n in v.n {
+                    for x in n.to_array() {
+                        w.write_all(&x.to_le_bytes())?;
+                    }
+                }
+                w.write_all(&(c.id as i32).to_le_bytes())?;
+                w.write_all(&[v.corner as u8])?;
+            }
+        }
+        let mut base = 0i32;
+        for c in curves {
+            let n = c.vertices.len() as i32;
+            for s in 0..c.segment_count() as i32 {
+                w.write_all(&(base + s).to_le_bytes())?;
+                w.write_all(&(base + (s + 1) % n).to_le_bytes())?;
+            }
+            base += n;
+        }
+        w.flush()
+    })();
+    r.map_err(|e| Error::output(path, e))
+}
+
+/// Reads polylines written by [`write_ply`].
+pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
+    let bytes = std::fs::read(path).map_err(|e| io_input(path, e))?;
+    let bad = |m: &str| Error::input(path, m.to_string());
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .ok_or_else(|| bad("not a crease curve PLY (no end_header)"))?;
+    let head = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("PLY header is not text"))?;
+    if !head.contains("format binary_little_endian") || !head.contains(HEADER) {
+        return Err(bad("not a crease curve PLY (unexpected properties)"));
+    }
+    let count = |name: &str| -> Result<usize> {
+        head.lines()
+            .find_map(|l| l.strip_prefix(&format!("element {name} ")))
+            .and_then(|s| s.trim().parse().ok())
+            .ok_or_else(|| bad("PLY header lacks an element count"))
+    };
+    let (nv, ne) = (count("vertex")?, count("edge")?);
+    let body = &bytes[end + 11..];
+    if body.len() < nv * VERTEX_BYTES + ne * 8 {
+        return Err(bad("truncated PLY data"));
+    }
+    let f64_at = |o: usize| f64::from_le_bytes(body[o..o + 8].try_into().unwrap());
+    let f32_at = |o: usize| f32::from_le_bytes(body[o..o + 4].try_into().unwrap());
+    let i32_at = |o: usize| i32::from_le_bytes(body[o..o + 4].try_into().unwrap());
+    let mut curves: Vec<Polyline> = Vec::new();
+    let mut first_vertex: Vec<usize> = Vec::new();
+    for i in 0..nv {
+        let o = i * VERTEX_BYTES;
+        let p = DVec3::new(f64_at(o), f64_at(o + 8), f64_at(o + 16));
+        let n1 = Vec3::new(f32_at(o + 24), f32_at(o + 28), f32_at(o + 32));
+        let n2 = Vec3::new(f32_at(o + 36), f32_at(o + 40), f32_at(o + 44));
+        let id = i32_at(o + 48) as u32;
+        let corner = body[o + 52] != 0;
+        if curves.last().map(|c| c.id) != Some(id) {
+            curves.push(Polyline { id, closed: false, vertices: vec![] });
+            first_vertex.push(i);
+        }
+        curves.last_mut().unwrap().vertices.push(Vertex { p, n: [n1, n2], corner });
+    }
+    // A closed curve's extra edge runs from its last vertex back to its first.
+    let eb = nv * VERTEX_BYTES;
+    for e in 0..ne {
+        let a = i32_at(eb + e * 8) as usize;
+        let b = i32_at(eb + e * 8 + 4) as usize;
+        if b < a {
+            if let Ok(k) = first_vertex.binary_search(&b) {
+                curves[k].closed = true;
+            }
+        }
+    }
+    Ok(curves)
+}

@@ -1,0 +1,251 @@
+//! LAS and LAZ input.
+//!
+//! Headers, VLRs and EVLRs are parsed by the `las` crate. Uncompressed point records are decoded
+//! straight from a memory map (only x, y, z and the classification are needed, so this is a
+//! handful of loads per point); LAZ records are decompressed by `las`/`laz` in chunks, in
+//! parallel where the file has chunk tables, and decoded the same way.
+
+use crate::cloud::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
+use crate::error::{io_input, Error, Result};
+use glam::DVec3;
+use memmap2::Mmap;
+use std::fs::File;
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+/// Where the fields crease needs sit in one point record.
+#[derive(Clone, Copy, Debug)]
+struct Layout {
+    record_len: usize,
+    /// Point formats 6-10 keep the class in a byte of its own and the withheld flag elsewhere.
+    extended: bool,
+    scale: DVec3,
+    offset: DVec3,
+}
+
+impl Layout {
+    /// Decodes `n` records from `bytes` into `out`, keeping points the filter accepts.
+    #[inline]
+    fn decode(&self, bytes: &[u8], out: &mut PointChunk, table: &[bool; 256], keep_withheld: bool) {
+        let rl = self.record_len;
+        let n = bytes.len() / rl;
+        out.xyz.reserve(n);
+        out.class.reserve(n);
+        for rec in bytes.chunks_exact(rl) {
+            let (class, withheld) = if self.extended {
+                (rec[16], rec[15] & 0x04 != 0)
+            } else {
+                (rec[15] & 0x1f, rec[15] & 0x80 != 0)
+            };
+            if !table[class as usize] || (withheld && !keep_withheld) {
+                continue;
+            }
+            let x = i32::from_le_bytes([rec[0], rec[1], rec[2], rec[3]]);
+            let y = i32::from_le_bytes([rec[4], rec[5], rec[6], rec[7]]);
+            let z = i32::from_le_bytes([rec[8], rec[9], rec[10], rec[11]]);
+            let p = DVec3::new(x as f64, y as f64, z as f64) * self.scale + self.offset;
+            out.xyz.push(p);
+            out.class.push(class);
+        }
+    }
+}
+
+/// Maps a `las` crate error to a one-line message.
+fn las_error(path: &Path, e: las::Error) -> Error {
+    match e {
+        las::Error::Io(io) => match io.kind() {
+            std::io::ErrorKind::UnexpectedEof => Error::input(path, "truncated LAS header or VLRs"),
+            _ => io_input(path, io),
+        },
+        las::Error::InvalidFileSignature(_) => {
+            Error::input(path, "not a LAS file (signature is not 'LASF')")
+        }
+        las::Error::LasZipError(z) => {
+            Error::input(path, format!("corrupt or truncated compressed point data: {z}"))
+        }
+        other => Error::input(path, format!("invalid LAS file: {other}")),
+    }
+}
+
+fn map_file(path: &Path) -> Result<Mmap> {
+    let file = File::open(path).map_err(|e| io_input(path, e))?;
+    let len = file.metadata().map_err(|e| io_input(path, e))?.len();
+    if len == 0 {
+        return Err(Error::input(path, "empty file"));
+    }
+    // SAFETY: the map is read-only; a file truncated underneath a running process is the one
+    // case memmap2 cannot guard against, and crease never writes its inputs.
+    let map = unsafe { Mmap::map(&file) }.map_err(|e| io_input(path, e))?;
+    Ok(map)
+}
+
+/// The part of the raw header crease checks and uses.
+struct Parsed {
+    header: las::Header,
+    offset_to_points: u64,
+    layout: Layout,
+    compressed: bool,
+}
+
+fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
+    if bytes.len() < 4 || &bytes[..4] != b"LASF" {
+        return Err(Error::input(path, "not a LAS file (signature is not 'LASF')"));
+    }
+    if bytes.len() < 227 {
+        return Err(Error::input(path, format!("truncated LAS header ({} bytes, need 227)", bytes.len())));
+    }
+    let raw = las::raw::Header::read_from(&bytes[..]).map_err(|e| las_error(path, e))?;
+    let fmt = raw.point_data_record_format & 0x3f;
+    let compressed = raw.point_data_record_format & 0x80 != 0;
+    if fmt > 10 {
+        return Err(Error::input(path, format!("unknown LAS point format {fmt}")));
+    }
+    let scale = DVec3::new(raw.x_scale_factor, raw.y_scale_factor, raw.z_scale_factor);
+    let offset = DVec3::new(raw.x_offset, raw.y_offset, raw.z_offset);
+    if !scale.is_finite() || !offset.is_finite() || scale.cmpeq(DVec3::ZERO).any() {
+        return Err(Error::input(path, format!("invalid scale {scale} or offset {offset} in the header")));
+    }
+    let offset_to_points = raw.offset_to_point_data as u64;
+    let record_len = raw.point_data_record_length as usize;
+    let header = las::Header::new(Cursor::new(bytes)).map_err(|e| las_error(path, e))?;
+    let base_len = {
+        let mut f = *header.point_format();
+        f.extra_bytes = 0;
+        f.len() as usize
+    };
+    if record_len < base_len {
+        return Err(Error::input(
+            path,
+            format!("point record length {record_len} is shorter than point format {fmt} needs ({base_len})"),
+        ));
+    }
+    let count = header.number_of_points();
+    if !compressed {
+        let need = offset_to_points + count * record_len as u64;
+        if need > bytes.len() as u64 {
+            let holds = bytes.len() as u64 - offset_to_points.min(bytes.len() as u64);
+            return Err(Error::input(
+                path,
+                format!(
+                    "header declares {count} points but the file holds only {} (truncated point data)",
+                    holds / record_len as u64
+                ),
+            ));
+        }
+    }
+    let layout = Layout { record_len, extended: fmt >= 6, scale, offset };
+    Ok(Parsed { header, offset_to_points, layout, compressed })
+}
+
+fn crs_of(header: &las::Header) -> Crs {
+    let wkt = header
+        .get_wkt_crs_bytes()
+        .map(|b| String::from_utf8_lossy(b).trim_end_matches('\0').trim().to_string())
+        .filter(|s| !s.is_empty());
+    // A malformed GeoTIFF key directory only loses the EPSG code, not the file.
+    let epsg = header.get_geotiff_crs().ok().flatten().and_then(|g| {
+        g.get_projected_crs_geo_key_value()
+            .or_else(|| g.get_geodetic_crs_geo_key_value())
+            .filter(|&c| c != 0 && c != 32767)
+    });
+    Crs { wkt, epsg }
+}
+
+fn cloud_header(path: &Path, p: &Parsed) -> Result<CloudHeader> {
+    let h = &p.header;
+    let b = h.bounds();
+    let bounds = Bounds { min: [b.min.x, b.min.y, b.min.z], max: [b.max.x, b.max.y, b.max.z] };
+    let fmt = h.point_format().to_u8().map_err(|e| las_error(path, e))?;
+    Ok(CloudHeader {
+        path: path.to_path_buf(),
+        format: if p.compressed { FileFormat::Laz } else { FileFormat::Las },
+        version: h.version().to_string(),
+        point_format: Some(fmt),
+        count: h.number_of_points(),
+        bounds,
+        crs: crs_of(h),
+    })
+}
+
+/// Reads only the header of a LAS/LAZ file.
+pub fn read_header(path: &Path) -> Result<CloudHeader> {
+    let map = map_file(path)?;
+    let parsed = parse(path, &map)?;
+    cloud_header(path, &parsed)
+}
+
+enum Points {
+    /// Uncompressed: records are read straight from the map.
+    Mapped { map: Mmap, offset: usize },
+    /// Compressed: the `las` crate decompresses into a reusable buffer.
+    Compressed { reader: Box<las::Reader>, buf: las::PointData },
+}
+
+/// A chunked reader over one LAS or LAZ file.
+pub struct LasReader {
+    path: PathBuf,
+    header: CloudHeader,
+    layout: Layout,
+    points: Points,
+    next: u64,
+}
+
+impl LasReader {
+    /// Maps the file and parses its header.
+    pub fn open(path: &Path) -> Result<LasReader> {
+        let map = map_file(path)?;
+        let parsed = parse(path, &map)?;
+        let header = cloud_header(path, &parsed)?;
+        let layout = parsed.layout;
+        let points = if parsed.compressed {
+            let reader = las::Reader::new(Cursor::new(map)).map_err(|e| las_error(path, e))?;
+            let buf = las::PointDataBuilder::new().for_header(reader.header()).build();
+            Points::Compressed { reader: Box::new(reader), buf }
+        } else {
+            #[cfg(unix)]
+            let _ = map.advise(memmap2::Advice::Sequential);
+            Points::Mapped { map, offset: parsed.offset_to_points as usize }
+        };
+        Ok(LasReader { path: path.to_path_buf(), header, layout, points, next: 0 })
+    }
+
+    /// The file's header.
+    pub fn header(&self) -> &CloudHeader {
+        &self.header
+    }
+
+    /// Reads up to `max` records into `out` (filtered); returns the number of records read.
+    pub fn read_chunk(
+        &mut self,
+        max: usize,
+        out: &mut PointChunk,
+        table: &[bool; 256],
+        keep_withheld: bool,
+    ) -> Result<usize> {
+        let left = self.header.count - self.next;
+        let n = (max as u64).min(left) as usize;
+        if n == 0 {
+            return Ok(0);
+        }
+        let rl = self.layout.record_len;
+        match &mut self.points {
+            Points::Mapped { map, offset } => {
+                let start = *offset + self.next as usize * rl;
+                self.layout.decode(&map[start..start + n * rl], out, table, keep_withheld);
+            }
+            Points::Compressed { reader, buf } => {
+                let got = reader.fill_points(n as u64, buf).map_err(|e| las_error(&self.path, e))?;
+                if got as usize != n {
+                    return Err(Error::input(
+                        &self.path,
+                        format!("header declares {} points but the data ends after {}", self.header.count, self.next + got),
+                    ));
+                }
+                let layout = Layout { record_len: buf.record_len(), ..self.layout };
+                layout.decode(buf.raw_bytes(), out, table, keep_withheld);
+            }
+        }
+        self.next += n as u64;
+        Ok(n)
+    }
+}

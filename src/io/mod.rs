@@ -1,0 +1,188 @@
+//! Streaming point input: LAS/LAZ (through the `las` crate, uncompressed LAS decoded straight
+//! from a memory map) and PLY (ascii and binary).
+//!
+//! Readers hand out points in chunks of bounded size so that memory does not grow with the
+//! file; [`read_header`] answers count, bounds and CRS without touching the points.
+
+mod las;
+mod ply;
+
+use crate::cloud::{Bounds, CloudHeader, FileFormat, PointChunk};
+use crate::error::{io_input, Error, Result};
+use std::path::{Path, PathBuf};
+
+/// Default number of points per chunk.
+pub const DEFAULT_CHUNK: usize = 1 << 20;
+
+/// ASPRS class for low points (noise).
+pub const CLASS_LOW_NOISE: u8 = 7;
+/// ASPRS class for high noise (LAS 1.4).
+pub const CLASS_HIGH_NOISE: u8 = 18;
+
+/// Which points a reader hands out.
+#[derive(Clone, Debug)]
+pub struct Filter {
+    /// Keep only these classifications (all if `None`).
+    pub classes: Option<Vec<u8>>,
+    /// Keep withheld points and noise classes 7 and 18 (dropped by default).
+    pub keep_noise: bool,
+}
+
+impl Default for Filter {
+    fn default() -> Self {
+        Filter { classes: None, keep_noise: false }
+    }
+}
+
+impl Filter {
+    /// A filter that keeps every point.
+    pub fn keep_all() -> Self {
+        Filter { classes: None, keep_noise: true }
+    }
+
+    /// A 256-entry table: `table[class]` is true if points of that class are kept.
+    /// Withheld points are handled separately (see [`Filter::keep_noise`]).
+    pub(crate) fn class_table(&self) -> [bool; 256] {
+        let mut t = [self.classes.is_none(); 256];
+        if let Some(cs) = &self.classes {
+            for &c in cs {
+                t[c as usize] = true;
+            }
+        }
+        if !self.keep_noise {
+            t[CLASS_LOW_NOISE as usize] = false;
+            t[CLASS_HIGH_NOISE as usize] = false;
+        }
+        t
+    }
+}
+
+/// Guesses the format of `path` from its extension.
+pub fn format_of(path: &Path) -> Option<FileFormat> {
+    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+    match ext.as_str() {
+        "las" => Some(FileFormat::Las),
+        "laz" => Some(FileFormat::Laz),
+        "ply" => Some(FileFormat::Ply),
+        _ => None,
+    }
+}
+
+/// Expands the user's paths: files are kept as given, directories are replaced by the point
+/// files (`.las`, `.laz`, `.ply`) directly inside them, sorted by name.
+pub fn expand_inputs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in paths {
+        let meta = std::fs::metadata(p).map_err(|e| io_input(p, e))?;
+        if meta.is_dir() {
+            let mut files: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| io_input(p, e))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.is_file() && format_of(f).is_some())
+                .collect();
+            if files.is_empty() {
+                return Err(Error::input(p, "directory holds no point files (.las, .laz, .ply)"));
+            }
+            files.sort();
+            out.extend(files);
+        } else {
+            if format_of(p).is_none() {
+                return Err(Error::input(p, "unknown file type (expected .las, .laz or .ply)"));
+            }
+            out.push(p.clone());
+        }
+    }
+    Ok(out)
+}
+
+/// Reads only the header of a point file. For PLY, whose header holds no bounds, the bounds
+/// are left empty; use [`scan_bounds`] to get them.
+pub fn read_header(path: &Path) -> Result<CloudHeader> {
+    match format_of(path) {
+        Some(FileFormat::Las) | Some(FileFormat::Laz) => las::read_header(path),
+        Some(FileFormat::Ply) => Ok(ply::PlyReader::open(path)?.header().clone()),
+        None => Err(Error::input(path, "unknown file type (expected .las, .laz or .ply)")),
+    }
+}
+
+/// Reads every point of `path` (without filtering) to find its true bounds and count.
+pub fn scan_bounds(path: &Path) -> Result<(Bounds, u64)> {
+    let mut reader = PointReader::open(path, &Filter::keep_all())?;
+    let mut chunk = PointChunk::default();
+    let mut b = Bounds::EMPTY;
+    let mut n = 0u64;
+    while reader.read_chunk(DEFAULT_CHUNK, &mut chunk)? > 0 {
+        for &p in &chunk.xyz {
+            b.grow(p);
+        }
+        n += chunk.len() as u64;
+    }
+    Ok((b, n))
+}
+
+enum Inner {
+    Las(las::LasReader),
+    Ply(ply::PlyReader),
+}
+
+/// A streaming reader over one point file.
+pub struct PointReader {
+    inner: Inner,
+    table: [bool; 256],
+    keep_withheld: bool,
+}
+
+impl PointReader {
+    /// Opens `path` and reads its header; points are read on demand.
+    pub fn open(path: &Path, filter: &Filter) -> Result<PointReader> {
+        let inner = match format_of(path) {
+            Some(FileFormat::Las) | Some(FileFormat::Laz) => Inner::Las(las::LasReader::open(path)?),
+            Some(FileFormat::Ply) => Inner::Ply(ply::PlyReader::open(path)?),
+            None => {
+                return Err(Error::input(path, "unknown file type (expected .las, .laz or .ply)"))
+            }
+        };
+        Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise })
+    }
+
+    /// The file's header.
+    pub fn header(&self) -> &CloudHeader {
+        match &self.inner {
+            Inner::Las(r) => r.header(),
+            Inner::Ply(r) => r.header(),
+        }
+    }
+
+    /// Replaces `out` with the next points: reads up to `max` records from the file and keeps
+    /// those the filter accepts. Returns the number of records read (0 at the end of the file);
+    /// `out` may hold fewer points than that.
+    pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk) -> Result<usize> {
+        out.clear();
+        match &mut self.inner {
+            Inner::Las(r) => r.read_chunk(max, out, &self.table, self.keep_withheld),
+            Inner::Ply(r) => r.read_chunk(max, out, &self.table),
+        }
+    }
+
+    /// Reads every remaining point into one chunk (for clouds known to fit in memory).
+    pub fn read_all(&mut self) -> Result<PointChunk> {
+        let mut all = PointChunk::default();
+        let mut chunk = PointChunk::default();
+        while self.read_chunk(DEFAULT_CHUNK, &mut chunk)? > 0 {
+            all.xyz.extend_from_slice(&chunk.xyz);
+            all.class.extend_from_slice(&chunk.class);
+        }
+        Ok(all)
+    }
+}
+
+/// Reads all points of all `paths` (filtered) into one chunk.
+pub fn read_all(paths: &[PathBuf], filter: &Filter) -> Result<PointChunk> {
+    let mut all = PointChunk::default();
+    for p in paths {
+        let c = PointReader::open(p, filter)?.read_all()?;
+        all.xyz.extend_from_slice(&c.xyz);
+        all.class.extend_from_slice(&c.class);
+    }
+    Ok(all)
+}

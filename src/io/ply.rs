@@ -1,0 +1,359 @@
+//! PLY input: ascii, binary little- and big-endian. Only x, y, z of the `vertex` element are
+//! read (as float or double); every other property and element is skipped. Binary files are
+//! memory-mapped.
+
+use crate::cloud::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
+use crate::error::{io_input, Error, Result};
+use glam::DVec3;
+use memmap2::Mmap;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Encoding {
+    Ascii,
+    Little,
+    Big,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &str) -> Option<Scalar> {
+        Some(match s {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+
+    /// Reads one binary value as f64.
+    #[inline]
+    fn read(self, b: &[u8], enc: Encoding) -> f64 {
+        macro_rules! rd {
+            ($t:ty, $n:expr) => {{
+                let a: [u8; $n] = b[..$n].try_into().unwrap();
+                (if enc == Encoding::Big { <$t>::from_be_bytes(a) } else { <$t>::from_le_bytes(a) }) as f64
+            }};
+        }
+        match self {
+            Scalar::I8 => b[0] as i8 as f64,
+            Scalar::U8 => b[0] as f64,
+            Scalar::I16 => rd!(i16, 2),
+            Scalar::U16 => rd!(u16, 2),
+            Scalar::I32 => rd!(i32, 4),
+            Scalar::U32 => rd!(u32, 4),
+            Scalar::F32 => rd!(f32, 4),
+            Scalar::F64 => rd!(f64, 8),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Property {
+    name: String,
+    /// For a list property, the type of its count.
+    list_count: Option<Scalar>,
+    ty: Scalar,
+}
+
+#[derive(Clone, Debug)]
+struct Element {
+    name: String,
+    count: u64,
+    props: Vec<Property>,
+}
+
+impl Element {
+    fn fixed_size(&self) -> Option<usize> {
+        self.props.iter().map(|p| if p.list_count.is_some() { None } else { Some(p.ty.size()) }).sum()
+    }
+}
+
+/// A chunked reader over one PLY file.
+pub struct PlyReader {
+    path: PathBuf,
+    header: CloudHeader,
+    map: Mmap,
+    enc: Encoding,
+    vertex: Element,
+    /// Index of x, y, z among the vertex properties.
+    xyz: [usize; 3],
+    /// Byte position of the next vertex (binary) or of the next token (ascii).
+    pos: usize,
+    next: u64,
+}
+
+fn bad(path: &Path, msg: impl Into<String>) -> Error {
+    Error::input(path, msg)
+}
+
+impl PlyReader {
+    /// Maps the file and parses its header.
+    pub fn open(path: &Path) -> Result<PlyReader> {
+        let file = File::open(path).map_err(|e| io_input(path, e))?;
+        let len = file.metadata().map_err(|e| io_input(path, e))?.len();
+        if len == 0 {
+            return Err(bad(path, "empty file"));
+        }
+        // SAFETY: read-only map of an input crease never writes.
+        let map = unsafe { Mmap::map(&file) }.map_err(|e| io_input(path, e))?;
+        if !map.starts_with(b"ply") {
+            return Err(bad(path, "not a PLY file (no 'ply' magic)"));
+        }
+        let end = find(&map, b"end_header")
+            .ok_or_else(|| bad(path, "truncated PLY header (no end_header)"))?;
+        let mut body = end + b"end_header".len();
+        // The header ends with one line break: "\n" or "\r\n".
+        if map.get(body) == Some(&b'\r') {
+            body += 1;
+        }
+        if map.get(body) == Some(&b'\n') {
+            body += 1;
+        }
+        let text = std::str::from_utf8(&map[..end]).map_err(|_| bad(path, "PLY header is not text"))?;
+        let mut enc = None;
+        let mut version = String::new();
+        let mut elements: Vec<Element> = Vec::new();
+        for (lineno, line) in text.lines().enumerate().skip(1) {
+            let t: Vec<&str> = line.split_whitespace().collect();
+            let err = |m: &str| bad(path, format!("PLY header line {}: {m}: '{}'", lineno + 1, line.trim()));
+            match t.first().copied() {
+                None | Some("comment") | Some("obj_info") => {}
+                Some("format") => {
+                    enc = Some(match t.get(1).copied() {
+                        Some("ascii") => Encoding::Ascii,
+                        Some("binary_little_endian") => Encoding::Little,
+                        Some("binary_big_endian") => Encoding::Big,
+                        _ => return Err(err("unknown format")),
+                    });
+                    version = format!("{} {}", t.get(1).unwrap_or(&""), t.get(2).unwrap_or(&""));
+                }
+                Some("element") => {
+                    let (Some(name), Some(count)) = (t.get(1), t.get(2).and_then(|c| c.parse().ok())) else {
+                        return Err(err("bad element"));
+                    };
+                    elements.push(Element { name: name.to_string(), count, props: vec![] });
+                }
+                Some("property") => {
+                    let el = elements.last_mut().ok_or_else(|| err("property before any element"))?;
+                    let prop = if t.get(1) == Some(&"list") {
+                        let (Some(c), Some(ty), Some(name)) =
+                            (t.get(2).and_then(|s| Scalar::parse(s)), t.get(3).and_then(|s| Scalar::parse(s)), t.get(4))
+                        else {
+                            return Err(err("bad list property"));
+                        };
+                        Property { name: name.to_string(), list_count: Some(c), ty }
+                    } else {
+                        let (Some(ty), Some(name)) = (t.get(1).and_then(|s| Scalar::parse(s)), t.get(2)) else {
+                            return Err(err("bad property"));
+                        };
+                        Property { name: name.to_string(), list_count: None, ty }
+                    };
+                    el.props.push(prop);
+                }
+                Some(_) => return Err(err("unknown keyword")),
+            }
+        }
+        let enc = enc.ok_or_else(|| bad(path, "PLY header has no format line"))?;
+        let vi = elements
+            .iter()
+            .position(|e| e.name == "vertex")
+            .ok_or_else(|| bad(path, "PLY file has no vertex element"))?;
+        let vertex = elements[vi].clone();
+        let mut xyz = [usize::MAX; 3];
+        for (k, name) in ["x", "y", "z"].iter().enumerate() {
+            let i = vertex
+                .props
+                .iter()
+                .position(|p| p.name == *name && p.list_count.is_none())
+                .ok_or_else(|| bad(path, "PLY vertex element has no x/y/z properties"))?;
+            xyz[k] = i;
+        }
+        // Skip the elements stored before the vertices.
+        let mut pos = body;
+        for e in &elements[..vi] {
+            pos = skip_element(path, &map, enc, e, pos)?;
+        }
+        if enc != Encoding::Ascii {
+            if let Some(sz) = vertex.fixed_size() {
+                let need = pos as u64 + vertex.count * sz as u64;
+                if need > map.len() as u64 {
+                    return Err(bad(
+                        path,
+                        format!(
+                            "header declares {} vertices but the file holds only {} (truncated)",
+                            vertex.count,
+                            (map.len() - pos.min(map.len())) / sz
+                        ),
+                    ));
+                }
+            }
+        }
+        let header = CloudHeader {
+            path: path.to_path_buf(),
+            format: FileFormat::Ply,
+            version,
+            point_format: None,
+            count: vertex.count,
+            bounds: Bounds::EMPTY,
+            crs: Crs::default(),
+        };
+        #[cfg(unix)]
+        let _ = map.advise(memmap2::Advice::Sequential);
+        Ok(PlyReader { path: path.to_path_buf(), header, map, enc, vertex, xyz, pos, next: 0 })
+    }
+
+    /// The file's header (bounds are empty: PLY headers do not hold them).
+    pub fn header(&self) -> &CloudHeader {
+        &self.header
+    }
+
+    /// Reads up to `max` vertices into `out`; returns how many were read.
+    pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
+        let n = (max as u64).min(self.header.count - self.next) as usize;
+        if n == 0 {
+            return Ok(0);
+        }
+        // PLY carries no classification: points are class 0 ("never classified").
+        let keep = table[0];
+        out.xyz.reserve(n);
+        let mut v = [0.0f64; 3];
+        for i in 0..n {
+            let idx = self.next + i as u64;
+            match self.enc {
+                Encoding::Ascii => self.read_ascii_vertex(&mut v, idx)?,
+                enc => self.read_binary_vertex(&mut v, idx, enc)?,
+            }
+            let p = DVec3::from(v);
+            if !p.is_finite() {
+                return Err(bad(&self.path, format!("vertex {idx} has a non-finite coordinate ({}, {}, {})", v[0], v[1], v[2])));
+            }
+            if keep {
+                out.xyz.push(p);
+                out.class.push(0);
+            }
+        }
+        self.next += n as u64;
+        Ok(n)
+    }
+
+    fn truncated(&self, idx: u64) -> Error {
+        bad(&self.path, format!("header declares {} vertices but the data ends at vertex {idx} (truncated)", self.header.count))
+    }
+
+    fn read_binary_vertex(&mut self, v: &mut [f64; 3], idx: u64, enc: Encoding) -> Result<()> {
+        let map = &self.map[..];
+        for (pi, p) in self.vertex.props.iter().enumerate() {
+            if let Some(ct) = p.list_count {
+                let b = map.get(self.pos..self.pos + ct.size()).ok_or_else(|| self.truncated(idx))?;
+                let k = ct.read(b, enc) as usize;
+                self.pos += ct.size() + k * p.ty.size();
+            } else {
+                let sz = p.ty.size();
+                let b = map.get(self.pos..self.pos + sz).ok_or_else(|| self.truncated(idx))?;
+                if let Some(k) = self.xyz.iter().position(|&x| x == pi) {
+                    v[k] = p.ty.read(b, enc);
+                }
+                self.pos += sz;
+            }
+        }
+        Ok(())
+    }
+
+    fn read_ascii_vertex(&mut self, v: &mut [f64; 3], idx: u64) -> Result<()> {
+        for (pi, p) in self.vertex.props.iter().enumerate() {
+            let tok = next_token(&self.map, &mut self.pos).ok_or_else(|| self.truncated(idx))?;
+            if p.list_count.is_some() {
+                let k: usize = parse_tok(tok).ok_or_else(|| bad(&self.path, format!("vertex {idx}: bad list count")))? as usize;
+                for _ in 0..k {
+                    next_token(&self.map, &mut self.pos).ok_or_else(|| self.truncated(idx))?;
+                }
+            } else if let Some(k) = self.xyz.iter().position(|&x| x == pi) {
+                v[k] = parse_tok(tok).ok_or_else(|| {
+                    bad(&self.path, format!("vertex {idx}: '{}' is not a number", String::from_utf8_lossy(tok)))
+                })?;
+            }
+        }
+        Ok(())
+    }
+}
+
+fn parse_tok(tok: &[u8]) -> Option<f64> {
+    std::str::from_utf8(tok).ok()?.parse::<f64>().ok()
+}
+
+fn next_token<'a>(map: &'a [u8], pos: &mut usize) -> Option<&'a [u8]> {
+    while *pos < map.len() && map[*pos].is_ascii_whitespace() {
+        *pos += 1;
+    }
+    let start = *pos;
+    while *pos < map.len() && !map[*pos].is_ascii_whitespace() {
+        *pos += 1;
+    }
+    (*pos > start).then(|| &map[start..*pos])
+}
+
+fn skip_element(path: &Path, map: &[u8], enc: Encoding, e: &Element, mut pos: usize) -> Result<usize> {
+    let trunc = || bad(path, format!("truncated PLY data in element '{}'", e.name));
+    if enc == Encoding::Ascii {
+        for _ in 0..e.count {
+            for p in &e.props {
+                let tok = next_token(map, &mut pos).ok_or_else(trunc)?;
+                if p.list_count.is_some() {
+                    let k = parse_tok(tok).ok_or_else(trunc)? as usize;
+                    for _ in 0..k {
+                        next_token(map, &mut pos).ok_or_else(trunc)?;
+                    }
+                }
+            }
+        }
+        return Ok(pos);
+    }
+    if let Some(sz) = e.fixed_size() {
+        return Ok(pos + e.count as usize * sz);
+    }
+    for _ in 0..e.count {
+        for p in &e.props {
+            match p.list_count {
+                Some(ct) => {
+                    let b = map.get(pos..pos + ct.size()).ok_or_else(trunc)?;
+                    pos += ct.size() + ct.read(b, enc) as usize * p.ty.size();
+                }
+                None => pos += p.ty.size(),
+            }
+        }
+    }
+    Ok(pos)
+}
+
+fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
+    // The header is short; search only its first 64 KiB.
+    let hay = &hay[..hay.len().min(1 << 16)];
+    hay.windows(needle.len()).position(|w| w == needle)
+}

@@ -1,0 +1,95 @@
+//! Reader tests on the real LAS/LAZ files in `../shared/data/real` (skipped when absent).
+
+use crease::io::{read_header, scan_bounds, PointReader, Filter};
+use std::path::{Path, PathBuf};
+
+fn real_dir() -> Option<PathBuf> {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real");
+    if d.is_dir() {
+        Some(d)
+    } else {
+        eprintln!("skipping: {} not found", d.display());
+        None
+    }
+}
+
+/// Every file: the header count equals the number of records read, and the header bounds equal
+/// the min/max of a full read (to the file's coordinate resolution).
+#[test]
+fn header_counts_and_bounds_match_a_full_read() {
+    let Some(dir) = real_dir() else { return };
+    let files = crease::io::expand_inputs(&[dir]).unwrap();
+    assert_eq!(files.len(), 10, "expected the ten shared test files");
+    for f in &files {
+        let h = read_header(f).unwrap();
+        let (b, n) = scan_bounds(f).unwrap();
+        assert_eq!(n, h.count, "{}: point count", f.display());
+        for i in 0..3 {
+            // Header bounds are stored as doubles, points as scaled integers: allow one unit of
+            // the coarsest scale the shared files use (0.01).
+            assert!((b.min[i] - h.bounds.min[i]).abs() <= 0.01 + 1e-9, "{}: min[{i}] {} vs header {}", f.display(), b.min[i], h.bounds.min[i]);
+            assert!((b.max[i] - h.bounds.max[i]).abs() <= 0.01 + 1e-9, "{}: max[{i}] {} vs header {}", f.display(), b.max[i], h.bounds.max[i]);
+        }
+    }
+}
+
+#[test]
+fn known_point_counts() {
+    let Some(dir) = real_dir() else { return };
+    for (name, count, fmt) in [
+        ("autzen_trim.las", 110_000, 3),
+        ("autzen_trim.laz", 110_000, 3),
+        ("lone-star.laz", 518_862, 1),
+        ("las_with_several_extra_byte_bloc.laz", 697_721, 8),
+        ("4_6_crop.las", 23_875, 3),
+        ("file_with_both_wkt_and_geotiff_vlrs.las", 25_408, 6),
+        ("fullwave.laz", 10_750, 10),
+        ("simple1_4.las", 22_600, 7),
+        ("1_4_w_evlr.laz", 1_000, 6),
+        ("plane.laz", 28_185, 3),
+    ] {
+        let h = read_header(&dir.join(name)).unwrap();
+        assert_eq!(h.count, count, "{name}");
+        assert_eq!(h.point_format, Some(fmt), "{name}");
+    }
+}
+
+/// LAS and LAZ copies of the same cloud decode to the same points.
+#[test]
+fn las_and_laz_agree() {
+    let Some(dir) = real_dir() else { return };
+    let a = PointReader::open(&dir.join("autzen_trim.las"), &Filter::keep_all()).unwrap().read_all().unwrap();
+    let b = PointReader::open(&dir.join("autzen_trim.laz"), &Filter::keep_all()).unwrap().read_all().unwrap();
+    assert_eq!(a.xyz, b.xyz);
+    assert_eq!(a.class, b.class);
+}
+
+#[test]
+fn crs_is_read() {
+    let Some(dir) = real_dir() else { return };
+    let h = read_header(&dir.join("file_with_both_wkt_and_geotiff_vlrs.las")).unwrap();
+    assert!(h.crs.wkt.is_some() && h.crs.epsg.is_some());
+    let h = read_header(&dir.join("las_with_several_extra_byte_bloc.laz")).unwrap();
+    assert_eq!(h.crs.epsg, Some(2154));
+    let h = read_header(&dir.join("plane.laz")).unwrap();
+    assert!(h.crs.is_unknown());
+}
+
+/// Class filters: autzen has classes 1 and 2 only.
+#[test]
+fn class_filter() {
+    let Some(dir) = real_dir() else { return };
+    let f = dir.join("autzen_trim.las");
+    let all = PointReader::open(&f, &Filter::keep_all()).unwrap().read_all().unwrap();
+    let ground = PointReader::open(&f, &Filter { classes: Some(vec![2]), keep_noise: false }).unwrap().read_all().unwrap();
+    let n2 = all.class.iter().filter(|&&c| c == 2).count();
+    assert!(n2 > 0 && n2 < all.len());
+    assert_eq!(ground.len(), n2);
+    assert!(ground.class.iter().all(|&c| c == 2));
+    // The LAS 1.4 file with classes 1-6: noise classes 7/18 dropped by default; count agrees.
+    let f = dir.join("las_with_several_extra_byte_bloc.laz");
+    let all = PointReader::open(&f, &Filter::keep_all()).unwrap().read_all().unwrap();
+    let def = PointReader::open(&f, &Filter::default()).unwrap().read_all().unwrap();
+    let noise = all.class.iter().filter(|&&c| c == 7 || c == 18).count();
+    assert!(def.len() <= all.len() - noise);
+}
