@@ -1,0 +1,188 @@
+//! Bad input: every case exits with code 2 and one line naming the file and the problem,
+//! never a panic.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn crease(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Runs `crease info PATH` and checks: exit 2, one stderr line, naming the file and containing
+/// `needle`, no panic.
+fn expect_error(path: &Path, needle: &str) {
+    let (code, _out, err) = crease(&["info", path.to_str().unwrap()]);
+    assert_eq!(code, 2, "exit code for {}: stderr {err}", path.display());
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line expected: {err}");
+    let name = path.file_name().unwrap().to_str().unwrap();
+    assert!(err.contains(name), "message should name the file: {err}");
+    assert!(err.contains(needle), "message should say '{needle}': {err}");
+}
+
+fn tmp() -> tempfile::TempDir {
+    tempfile::tempdir().unwrap()
+}
+
+/// A valid minimal LAS 1.2 file, point format 0, with `n` points, from the las crate's writer.
+fn small_las(path: &Path, n: usize) {
+    let mut b = las::Builder::from((1, 2));
+    b.point_format = las::point::Format::new(0).unwrap();
+    let mut w = las::Writer::from_path(path, b.into_header().unwrap()).unwrap();
+    for i in 0..n {
+        w.write_point(las::Point { x: i as f64, y: 2.0 * i as f64, z: 1.0, ..Default::default() }).unwrap();
+    }
+    w.close().unwrap();
+}
+
+#[test]
+fn missing_file() {
+    let d = tmp();
+    expect_error(&d.path().join("nope.las"), "no such file");
+}
+
+#[test]
+fn empty_file() {
+    let d = tmp();
+    for name in ["empty.las", "empty.laz", "empty.ply"] {
+        let p = d.path().join(name);
+        std::fs::write(&p, b"").unwrap();
+        expect_error(&p, "empty file");
+    }
+}
+
+#[test]
+fn truncated_header() {
+    let d = tmp();
+    let good = d.path().join("good.las");
+    small_las(&good, 10);
+    let bytes = std::fs::read(&good).unwrap();
+    let p = d.path().join("cut.las");
+    std::fs::write(&p, &bytes[..100]).unwrap();
+    expect_error(&p, "truncated LAS header");
+    let p = d.path().join("cut.ply");
+    std::fs::write(&p, b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n").unwrap();
+    expect_error(&p, "truncated PLY header");
+}
+
+#[test]
+fn point_count_larger_than_data() {
+    let d = tmp();
+    let good = d.path().join("good.las");
+    small_las(&good, 10);
+    let bytes = std::fs::read(&good).unwrap();
+    // Drop the last three records.
+    let p = d.path().join("short.las");
+    std::fs::write(&p, &bytes[..bytes.len() - 3 * 20]).unwrap();
+    expect_error(&p, "header declares 10 points but the file holds only 7");
+    let p = d.path().join("short.ply");
+    let mut ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec();
+    ply.extend(std::iter::repeat(0u8).take(12 * 3));
+    std::fs::write(&p, &ply).unwrap();
+    expect_error(&p, "header declares 5 vertices but the file holds only 3");
+}
+
+#[test]
+fn truncated_laz_data() {
+    let Some(real) = shared("autzen_trim.laz") else { return };
+    let d = tmp();
+    let bytes = std::fs::read(real).unwrap();
+    let p = d.path().join("cut.laz");
+    std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    // info reads a sample only; extracting the bounds of every point must fail cleanly.
+    let h = crease::io::read_header(&p);
+    let full = h.and_then(|_| crease::io::scan_bounds(&p));
+    let e = full.expect_err("half a LAZ file must not read as complete").to_string();
+    assert!(e.contains("cut.laz"), "{e}");
+}
+
+#[test]
+fn unknown_point_format() {
+    let d = tmp();
+    let good = d.path().join("good.las");
+    small_las(&good, 4);
+    let mut bytes = std::fs::read(&good).unwrap();
+    bytes[104] = 42; // point data record format
+    let p = d.path().join("fmt42.las");
+    std::fs::write(&p, &bytes).unwrap();
+    expect_error(&p, "unknown LAS point format 42");
+}
+
+#[test]
+fn not_a_las_file() {
+    let d = tmp();
+    let p = d.path().join("text.las");
+    std::fs::write(&p, "hello, this is not a point cloud").unwrap();
+    expect_error(&p, "not a LAS file");
+}
+
+#[test]
+fn ply_without_xyz() {
+    let d = tmp();
+    let p = d.path().join("noxyz.ply");
+    std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 2\nproperty float a\nproperty float b\nend_header\n1 2\n3 4\n").unwrap();
+    expect_error(&p, "no x/y/z");
+}
+
+#[test]
+fn non_finite_coordinates() {
+    let d = tmp();
+    let p = d.path().join("nan.ply");
+    std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\nnan 1 1\n").unwrap();
+    expect_error(&p, "non-finite coordinate");
+    let p = d.path().join("inf.ply");
+    let mut ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty double x\nproperty double y\nproperty double z\nend_header\n".to_vec();
+    for v in [1.0f64, f64::INFINITY, 0.0] {
+        ply.extend(v.to_le_bytes());
+    }
+    std::fs::write(&p, &ply).unwrap();
+    expect_error(&p, "non-finite coordinate");
+    // LAS stores integers, so only a non-finite scale or offset can make coordinates non-finite.
+    let good = d.path().join("good.las");
+    small_las(&good, 4);
+    let mut bytes = std::fs::read(&good).unwrap();
+    bytes[131..139].copy_from_slice(&f64::NAN.to_le_bytes()); // x scale factor
+    let p = d.path().join("nanscale.las");
+    std::fs::write(&p, &bytes).unwrap();
+    expect_error(&p, "invalid scale");
+}
+
+#[test]
+fn directory_without_point_files() {
+    let d = tmp();
+    std::fs::write(d.path().join("readme.txt"), "no points here").unwrap();
+    let (code, _, err) = crease(&["info", d.path().to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(err.contains("directory holds no point files"), "{err}");
+    assert!(err.contains(d.path().file_name().unwrap().to_str().unwrap()));
+}
+
+#[test]
+fn unknown_extension() {
+    let d = tmp();
+    let p = d.path().join("cloud.xyz");
+    std::fs::write(&p, "1 2 3\n").unwrap();
+    expect_error(&p, "unknown file type");
+}
+
+#[test]
+fn valid_small_files_still_read() {
+    let d = tmp();
+    let p = d.path().join("good.las");
+    small_las(&p, 10);
+    let (code, out, err) = crease(&["info", "--json", p.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v[0]["count"], 10);
+    assert_eq!(v[0]["bounds"]["max"][1], 18.0);
+}
+
+fn shared(name: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real").join(name);
+    p.exists().then_some(p)
+}
