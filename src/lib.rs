@@ -7,9 +7,12 @@
 pub mod cloud;
 pub mod curves;
 pub mod error;
+pub mod eval;
 pub mod info;
 pub mod io;
+pub mod mem;
 pub mod spacing;
 pub mod spatial;
+pub mod synth;
 
 pub use error::{Error, Result};

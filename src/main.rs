@@ -1,15 +1,33 @@
 //! The `crease` command line: parses arguments and calls the library.
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use crease::synth::{self, Sampling, SynthOptions};
 use crease::Error;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::Instant;
 
 #[derive(Parser)]
 #[command(name = "crease", version, about = "Extracts sharp feature curves from laser scans larger than memory")]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
+}
+
+#[derive(Args, Clone)]
+struct FilterArgs {
+    /// Keep only these ASPRS classes (comma-separated, e.g. 2,6).
+    #[arg(long, value_delimiter = ',')]
+    classes: Option<Vec<u8>>,
+    /// Keep withheld points and noise classes 7 and 18 (dropped by default).
+    #[arg(long)]
+    keep_noise: bool,
+}
+
+impl FilterArgs {
+    fn filter(&self) -> crease::io::Filter {
+        crease::io::Filter { classes: self.classes.clone(), keep_noise: self.keep_noise }
+    }
 }
 
 #[derive(Subcommand)]
@@ -23,15 +41,138 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Reads every point: true counts and bounds after filtering, read speed and peak memory.
+    Scan {
+        /// Files or directories.
+        #[arg(required = true)]
+        paths: Vec<PathBuf>,
+        #[command(flatten)]
+        filter: FilterArgs,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Extracts feature curves (not implemented yet).
     Extract {
         /// Input files or directories.
         paths: Vec<PathBuf>,
     },
-    /// Scores extracted curves against ground truth (not implemented yet).
-    Eval,
-    /// Generates test clouds with ground-truth curves (not implemented yet).
-    Synth,
+    /// Scores extracted curves against ground truth.
+    Eval {
+        /// Ground-truth curves (OBJ polylines).
+        #[arg(long)]
+        truth: PathBuf,
+        /// Extracted curves (OBJ or crease PLY).
+        #[arg(long)]
+        curves: PathBuf,
+        /// Length unit dB (default: the truth's bounding-box diagonal).
+        #[arg(long)]
+        diag: Option<f64>,
+        /// Match tolerance in dB units.
+        #[arg(long, default_value_t = 0.01)]
+        tol: f64,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Generates test clouds with ground-truth curves (OUT and OUT.truth.obj).
+    Synth {
+        #[command(subcommand)]
+        what: SynthCmd,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SamplingArg {
+    Uniform,
+    Scanlines,
+    Nonuniform,
+}
+
+#[derive(Args)]
+struct SampleArgs {
+    /// Number of points.
+    #[arg(short, default_value_t = 500_000)]
+    n: usize,
+    /// Noise level: points move by up to this many bounding-box diagonals.
+    #[arg(long, default_value_t = 0.0)]
+    noise: f64,
+    /// Share of points replaced by uniform outliers.
+    #[arg(long, default_value_t = 0.0)]
+    outliers: f64,
+    /// Sampling pattern.
+    #[arg(long, value_enum, default_value = "uniform")]
+    sampling: SamplingArg,
+    /// For scan-line sampling: line separation over along-line spacing.
+    #[arg(long, default_value_t = 4.0)]
+    anisotropy: f64,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output cloud (.las or .ply); truth goes to OUT.truth.obj.
+    #[arg(short)]
+    o: PathBuf,
+}
+
+impl SampleArgs {
+    fn options(&self) -> Result<SynthOptions, Error> {
+        if !(0.0..=1.0).contains(&self.outliers) || self.noise < 0.0 || self.anisotropy < 1.0 {
+            return Err(Error::Usage("--noise must be >= 0, --outliers in [0, 1], --anisotropy >= 1".into()));
+        }
+        let sampling = match self.sampling {
+            SamplingArg::Uniform => Sampling::Uniform,
+            SamplingArg::Scanlines => Sampling::ScanLines { anisotropy: self.anisotropy },
+            SamplingArg::Nonuniform => Sampling::NonUniform,
+        };
+        Ok(SynthOptions { n: self.n, noise: self.noise, outliers: self.outliers, sampling, seed: self.seed })
+    }
+}
+
+#[derive(Subcommand)]
+enum SynthCmd {
+    /// A CAD-like shape with analytic edges: cube, chamfer, holecube, cylinder, step,
+    /// octahedron, fandisk, wedge (two planes at --angle degrees).
+    Shape {
+        /// Shape name.
+        name: String,
+        /// Dihedral angle of the wedge, in degrees.
+        #[arg(long, default_value_t = 90.0)]
+        angle: f64,
+        #[command(flatten)]
+        sample: SampleArgs,
+    },
+    /// Area-weighted sampling of a triangle mesh (.off or .obj); truth = sharp mesh edges.
+    Mesh {
+        /// The mesh.
+        file: PathBuf,
+        /// Edges whose face normals differ by more than this (degrees) are sharp.
+        #[arg(long, default_value_t = 30.0)]
+        angle: f64,
+        #[command(flatten)]
+        sample: SampleArgs,
+    },
+    /// A large outdoor scene (streets, curbs, buildings) streamed to LAS with constant memory.
+    Scene {
+        /// Number of points.
+        #[arg(short, default_value_t = 10_000_000)]
+        n: u64,
+        /// Noise radius in metres.
+        #[arg(long, default_value_t = 0.005)]
+        noise: f64,
+        /// Random seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output LAS file; truth goes to OUT.truth.obj.
+        #[arg(short)]
+        o: PathBuf,
+    },
+}
+
+fn read_curves(path: &std::path::Path) -> Result<Vec<crease::curves::Polyline>, Error> {
+    match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+        Some("ply") => crease::curves::read_ply(path),
+        _ => crease::curves::read_obj(path),
+    }
 }
 
 fn run(cli: Cli) -> Result<(), Error> {
@@ -44,10 +185,74 @@ fn run(cli: Cli) -> Result<(), Error> {
             } else {
                 print!("{}", crease::info::render_text(&infos));
             }
-            Ok(())
         }
-        Cmd::Extract { .. } | Cmd::Eval | Cmd::Synth => Err(Error::Usage("not implemented yet".into())),
+        Cmd::Scan { paths, filter, json } => {
+            let files = crease::io::expand_inputs(&paths)?;
+            let t = Instant::now();
+            let mut report = vec![];
+            let mut total = 0u64;
+            for f in &files {
+                let s = crease::io::scan(f, &filter.filter())?;
+                total += s.records;
+                report.push(s);
+            }
+            let secs = t.elapsed().as_secs_f64();
+            let rate = total as f64 / secs.max(1e-9);
+            let peak = crease::mem::peak_rss();
+            if json {
+                let v = serde_json::json!({"files": report, "records": total, "seconds": secs, "points_per_second": rate, "peak_rss_bytes": peak});
+                println!("{}", serde_json::to_string_pretty(&v).expect("serialises"));
+            } else {
+                for s in &report {
+                    println!("{}: {} records, {} kept, min {:?} max {:?}", s.path.display(), s.records, s.kept, s.bounds.min, s.bounds.max);
+                }
+                println!("{total} records in {secs:.3} s: {:.1} M points/s, peak RSS {:.1} MB", rate / 1e6, peak as f64 / 1e6);
+            }
+        }
+        Cmd::Eval { truth, curves, diag, tol, json } => {
+            let t = read_curves(&truth)?;
+            let c = read_curves(&curves)?;
+            let s = crease::eval::evaluate(&t, &c, &crease::eval::EvalOptions { diag, tol, ..Default::default() });
+            if json {
+                println!("{}", serde_json::to_string_pretty(&s).expect("scores serialise"));
+            } else {
+                print!("{}", crease::eval::render_text(&s));
+            }
+        }
+        Cmd::Synth { what } => synth_cmd(what)?,
+        Cmd::Extract { .. } => return Err(Error::Usage("extract: not implemented yet".into())),
     }
+    Ok(())
+}
+
+fn synth_cmd(what: SynthCmd) -> Result<(), Error> {
+    let t = Instant::now();
+    let (out, n) = match what {
+        SynthCmd::Shape { name, angle, sample } => {
+            let shape = synth::shapes::shape(&name, angle).ok_or_else(|| {
+                Error::Usage(format!("unknown shape '{name}' (one of: {})", synth::shapes::SHAPES.join(", ")))
+            })?;
+            let n = synth::write_sampled(&shape, &sample.options()?, &sample.o)?;
+            (sample.o, n as u64)
+        }
+        SynthCmd::Mesh { file, angle, sample } => {
+            let mesh = synth::mesh::read_mesh(&file)?;
+            let n = synth::write_sampled(&mesh.to_shape(angle), &sample.options()?, &sample.o)?;
+            (sample.o, n as u64)
+        }
+        SynthCmd::Scene { n, noise, seed, o } => {
+            let n = synth::scene::write_scene(&synth::scene::SceneOptions { n, noise, seed }, &o)?;
+            (o, n)
+        }
+    };
+    eprintln!(
+        "wrote {n} points to {} and truth to {} in {:.1} s (peak RSS {:.0} MB)",
+        out.display(),
+        synth::truth_path(&out).display(),
+        t.elapsed().as_secs_f64(),
+        crease::mem::peak_rss() as f64 / 1e6
+    );
+    Ok(())
 }
 
 fn main() -> ExitCode {

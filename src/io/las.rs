@@ -181,6 +181,18 @@ enum Points {
     Compressed { reader: Box<las::Reader>, buf: las::PointData },
 }
 
+/// Releases decoded pages of a read-only map from this process's resident set, so that reading
+/// a file larger than memory keeps RSS flat (the kernel may keep them in its page cache).
+fn release(map: &Mmap, start: usize, end: usize) {
+    const PAGE: usize = 4096;
+    let (a, b) = (start / PAGE * PAGE, end / PAGE * PAGE);
+    if b > a {
+        // SAFETY: the map is read-only and file-backed; dropped pages are re-read from the file
+        // if touched again, so no data is lost and no reference sees changed contents.
+        let _ = unsafe { map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, a, b - a) };
+    }
+}
+
 /// A chunked reader over one LAS or LAZ file.
 pub struct LasReader {
     path: PathBuf,
@@ -198,7 +210,11 @@ impl LasReader {
         let header = cloud_header(path, &parsed)?;
         let layout = parsed.layout;
         let points = if parsed.compressed {
-            let reader = las::Reader::new(Cursor::new(map)).map_err(|e| las_error(path, e))?;
+            // Decompression reads the file once, front to back: a buffered reader keeps resident
+            // memory bounded, where a map would keep every page touched.
+            drop(map);
+            let file = File::open(path).map_err(|e| io_input(path, e))?;
+            let reader = las::Reader::new(std::io::BufReader::with_capacity(1 << 20, file)).map_err(|e| las_error(path, e))?;
             let buf = las::PointDataBuilder::new().for_header(reader.header()).build();
             Points::Compressed { reader: Box::new(reader), buf }
         } else {
@@ -232,6 +248,7 @@ impl LasReader {
             Points::Mapped { map, offset } => {
                 let start = *offset + self.next as usize * rl;
                 self.layout.decode(&map[start..start + n * rl], out, table, keep_withheld);
+                release(map, start, start + n * rl);
             }
             Points::Compressed { reader, buf } => {
                 let got = reader.fill_points(n as u64, buf).map_err(|e| las_error(&self.path, e))?;

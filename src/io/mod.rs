@@ -6,6 +6,9 @@
 
 mod las;
 mod ply;
+mod write;
+
+pub use write::{PointWriter, WriteOptions};
 
 use crate::cloud::{Bounds, CloudHeader, FileFormat, PointChunk};
 use crate::error::{io_input, Error, Result};
@@ -185,4 +188,37 @@ pub fn read_all(paths: &[PathBuf], filter: &Filter) -> Result<PointChunk> {
         all.class.extend_from_slice(&c.class);
     }
     Ok(all)
+}
+
+/// What a full read of one file found.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ScanResult {
+    /// The file.
+    pub path: PathBuf,
+    /// Records read.
+    pub records: u64,
+    /// Points the filter kept.
+    pub kept: u64,
+    /// Bounds of the kept points.
+    pub bounds: Bounds,
+}
+
+/// Reads every point of `path` through `filter`, in chunks.
+pub fn scan(path: &Path, filter: &Filter) -> Result<ScanResult> {
+    let mut reader = PointReader::open(path, filter)?;
+    let mut chunk = PointChunk::default();
+    let mut b = Bounds::EMPTY;
+    let (mut records, mut kept) = (0u64, 0u64);
+    loop {
+        let n = reader.read_chunk(DEFAULT_CHUNK, &mut chunk)?;
+        if n == 0 {
+            break;
+        }
+        records += n as u64;
+        kept += chunk.len() as u64;
+        for &p in &chunk.xyz {
+            b.grow(p);
+        }
+    }
+    Ok(ScanResult { path: path.to_path_buf(), records, kept, bounds: b })
 }
