@@ -30,6 +30,53 @@ impl FilterArgs {
     }
 }
 
+/// Method parameters; lengths in model units (defaults are multiples of the spacing kappa).
+#[derive(Args, Clone)]
+struct ParamArgs {
+    /// Point spacing kappa (default: median nearest-neighbour distance).
+    #[arg(long)]
+    kappa: Option<f64>,
+    /// Candidate fit radius (default 6 kappa).
+    #[arg(long)]
+    fit_radius: Option<f64>,
+    /// Robust projection radius (default 9 kappa).
+    #[arg(long)]
+    rmls_radius: Option<f64>,
+    /// Residual threshold tau (default: mean residual).
+    #[arg(long)]
+    tau: Option<f64>,
+    /// Polyline step s_max (default 4.5 kappa).
+    #[arg(long)]
+    step: Option<f64>,
+    /// Largest turn while growing, degrees.
+    #[arg(long)]
+    max_turn: Option<f64>,
+    /// Random seed of the robust fits.
+    #[arg(long)]
+    seed: Option<u64>,
+}
+
+impl ParamArgs {
+    fn params(&self) -> Result<crease::extract::Params, Error> {
+        for (name, v) in [("kappa", self.kappa), ("fit-radius", self.fit_radius), ("rmls-radius", self.rmls_radius), ("step", self.step)] {
+            if let Some(v) = v {
+                if !(v > 0.0 && v.is_finite()) {
+                    return Err(Error::Usage(format!("--{name} must be a positive number")));
+                }
+            }
+        }
+        Ok(crease::extract::Params {
+            kappa: self.kappa,
+            fit_radius: self.fit_radius,
+            rmls_radius: self.rmls_radius,
+            tau: self.tau,
+            step: self.step,
+            max_turn_deg: self.max_turn,
+            seed: self.seed,
+        })
+    }
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Prints format, point count, bounds, CRS and a spacing estimate for each input file.
@@ -52,10 +99,24 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Extracts feature curves (not implemented yet).
+    /// Extracts feature curves; writes curves.obj, curves.ply, curves.geojson and report.json.
     Extract {
-        /// Input files or directories.
+        /// Input files or directories (a directory is one cloud made of all its point files).
+        #[arg(required = true)]
         paths: Vec<PathBuf>,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
+        #[command(flatten)]
+        filter: FilterArgs,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Print nothing but errors.
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Scores extracted curves against ground truth.
     Eval {
@@ -220,7 +281,18 @@ fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Cmd::Synth { what } => synth_cmd(what)?,
-        Cmd::Extract { .. } => return Err(Error::Usage("extract: not implemented yet".into())),
+        Cmd::Extract { paths, out, filter, params, threads, quiet } => {
+            if let Some(n) = threads {
+                rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
+            }
+            let r = crease::run::run_extract(&paths, &out, &params.params()?, &filter.filter())?;
+            if !quiet {
+                eprintln!(
+                    "{} curves from {} points in {:.2} s (kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
+                    r.counts.curves, r.counts.points, r.total_seconds, r.params.kappa, r.tau, r.counts.candidates, r.counts.edge_points, r.counts.corners, out.display()
+                );
+            }
+        }
     }
     Ok(())
 }

@@ -1,0 +1,35 @@
+//! Stage 1: candidate feature points by MLS fit residual (Daniels 2007, section 3.2).
+//!
+//! For every point, a weighted plane (PCA, Gaussian weights) and a bivariate quadratic over it
+//! are fitted to the neighbourhood; the residual is the largest distance of a neighbour from the
+//! quadratic along the plane normal. Points with residual above tau are candidates.
+
+use super::cloud::Cloud;
+use super::fit::{Frame, Pca, Quadric};
+use rayon::prelude::*;
+
+/// Most neighbours used by one fit (the nearest ones).
+pub const MAX_FIT_NEIGHBOURS: usize = 64;
+
+/// The fit residual of every point in `which`, for neighbourhood radius `r`.
+pub fn residuals(cloud: &Cloud, which: &[u32], r: f64) -> Vec<f32> {
+    which
+        .par_iter()
+        .map_init(Vec::new, |buf, &i| residual_at(cloud, i as usize, r, buf))
+        .collect()
+}
+
+fn residual_at(cloud: &Cloud, i: usize, r: f64, buf: &mut Vec<(u32, f32)>) -> f32 {
+    let q = cloud.at(i);
+    cloud.neighbours(q, r, MAX_FIT_NEIGHBOURS, buf);
+    if buf.len() < 8 {
+        // Too sparse to fit a quadratic: not evidence of a feature.
+        return 0.0;
+    }
+    let h2 = (r * r) / 4.0;
+    let pts = || buf.iter().map(|&(j, d2)| (cloud.at(j as usize), (-(d2 as f64) / h2).exp()));
+    let Some(pca) = Pca::of(pts()) else { return 0.0 };
+    let frame = Frame::new(pca.mean, pca.normal());
+    let Some(quad) = Quadric::fit(frame, pts(), 1e-6) else { return 0.0 };
+    buf.iter().map(|&(j, _)| quad.value(cloud.at(j as usize)).abs()).fold(0.0, f64::max) as f32
+}

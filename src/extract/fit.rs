@@ -1,0 +1,265 @@
+//! Small, allocation-free fits: weighted PCA (planes, lines) and bivariate quadratics over a
+//! plane, plus the implicit form of a fitted surface for Newton projection.
+
+use glam::DVec3;
+use nalgebra::{Matrix3, Matrix6, Vector6};
+
+/// Principal components of a weighted point set: eigenvalues in decreasing order with their
+/// unit eigenvectors.
+#[derive(Clone, Copy, Debug)]
+pub struct Pca {
+    /// Weighted mean.
+    pub mean: DVec3,
+    /// Eigenvalues of the covariance, largest first.
+    pub values: [f64; 3],
+    /// Matching unit eigenvectors.
+    pub vectors: [DVec3; 3],
+}
+
+impl Pca {
+    /// PCA of `(point, weight)` pairs; None if the total weight is zero.
+    pub fn of(points: impl Iterator<Item = (DVec3, f64)> + Clone) -> Option<Pca> {
+        let (mut sw, mut sp) = (0.0, DVec3::ZERO);
+        for (p, w) in points.clone() {
+            sw += w;
+            sp += p * w;
+        }
+        if sw <= 0.0 {
+            return None;
+        }
+        let mean = sp / sw;
+        let mut c = [0.0f64; 6];
+        for (p, w) in points {
+            let d = p - mean;
+            c[0] += w * d.x * d.x;
+            c[1] += w * d.x * d.y;
+            c[2] += w * d.x * d.z;
+            c[3] += w * d.y * d.y;
+            c[4] += w * d.y * d.z;
+            c[5] += w * d.z * d.z;
+        }
+        let m = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]) / sw;
+        let e = m.symmetric_eigen();
+        let mut idx = [0usize, 1, 2];
+        idx.sort_by(|&a, &b| e.eigenvalues[b].total_cmp(&e.eigenvalues[a]));
+        let vec = |i: usize| {
+            let c = e.eigenvectors.column(i);
+            DVec3::new(c[0], c[1], c[2]).normalize_or_zero()
+        };
+        Some(Pca {
+            mean,
+            values: idx.map(|i| e.eigenvalues[i].max(0.0)),
+            vectors: idx.map(vec),
+        })
+    }
+
+    /// Normal of the best-fitting plane (smallest component).
+    pub fn normal(&self) -> DVec3 {
+        self.vectors[2]
+    }
+
+    /// Direction of the best-fitting line (largest component).
+    pub fn axis(&self) -> DVec3 {
+        self.vectors[0]
+    }
+
+    /// Linearity l0 / (l0 + l1 + l2), in [1/3, 1].
+    pub fn linearity(&self) -> f64 {
+        let s = self.values.iter().sum::<f64>();
+        if s > 0.0 { self.values[0] / s } else { 0.0 }
+    }
+
+    /// Rotation-invariant line measure (l0 - l1) / (l0 + l1), in [0, 1].
+    pub fn line_measure(&self) -> f64 {
+        let s = self.values[0] + self.values[1];
+        if s > 0.0 { (self.values[0] - self.values[1]) / s } else { 0.0 }
+    }
+}
+
+/// An orthonormal frame: origin, two tangent axes and a normal.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    /// Origin.
+    pub o: DVec3,
+    /// First tangent axis.
+    pub u: DVec3,
+    /// Second tangent axis.
+    pub v: DVec3,
+    /// Normal.
+    pub n: DVec3,
+}
+
+impl Frame {
+    /// A frame at `o` with normal `n` (unit).
+    pub fn new(o: DVec3, n: DVec3) -> Frame {
+        let u = n.any_orthonormal_vector();
+        Frame { o, u, v: n.cross(u), n }
+    }
+
+    /// Local coordinates of `p`.
+    #[inline]
+    pub fn local(&self, p: DVec3) -> DVec3 {
+        let d = p - self.o;
+        DVec3::new(d.dot(self.u), d.dot(self.v), d.dot(self.n))
+    }
+}
+
+/// A height function w = a0 + a1 u + a2 v + a3 u^2 + a4 uv + a5 v^2 over a frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Quadric {
+    /// The frame.
+    pub frame: Frame,
+    /// Coefficients.
+    pub a: [f64; 6],
+}
+
+impl Quadric {
+    /// The flat surface of a frame (the plane itself).
+    pub fn plane(frame: Frame) -> Quadric {
+        Quadric { frame, a: [0.0; 6] }
+    }
+
+    /// Height of the surface above (u, v).
+    #[inline]
+    pub fn height(&self, u: f64, v: f64) -> f64 {
+        let a = &self.a;
+        a[0] + a[1] * u + a[2] * v + a[3] * u * u + a[4] * u * v + a[5] * v * v
+    }
+
+    /// Signed distance along the frame normal from the surface to `p` (the implicit function).
+    #[inline]
+    pub fn value(&self, p: DVec3) -> f64 {
+        let l = self.frame.local(p);
+        l.z - self.height(l.x, l.y)
+    }
+
+    /// Gradient of [`Quadric::value`] at `p` (not normalised).
+    #[inline]
+    pub fn gradient(&self, p: DVec3) -> DVec3 {
+        let l = self.frame.local(p);
+        let a = &self.a;
+        let gu = a[1] + 2.0 * a[3] * l.x + a[4] * l.y;
+        let gv = a[2] + a[4] * l.x + 2.0 * a[5] * l.y;
+        self.frame.n - self.frame.u * gu - self.frame.v * gv
+    }
+
+    /// Unit surface normal at `p`.
+    pub fn normal(&self, p: DVec3) -> DVec3 {
+        self.gradient(p).normalize_or_zero()
+    }
+
+    /// Weighted least-squares fit of heights over `frame` to `(point, weight)` pairs. The
+    /// curvature terms are damped by `ridge` (relative to the data's spread) so that a
+    /// one-sided or sparse neighbourhood falls back smoothly towards a plane.
+    pub fn fit(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> Option<Quadric> {
+        let mut m = Matrix6::<f64>::zeros();
+        let mut b = Vector6::<f64>::zeros();
+        let mut scale2 = 0.0;
+        let mut sw = 0.0;
+        for (p, w) in points {
+            let l = frame.local(p);
+            let row = Vector6::new(1.0, l.x, l.y, l.x * l.x, l.x * l.y, l.y * l.y);
+            m += row * row.transpose() * w;
+            b += row * (l.z * w);
+            scale2 += w * (l.x * l.x + l.y * l.y);
+            sw += w;
+        }
+        if sw <= 0.0 {
+            return None;
+        }
+        let s2 = (scale2 / sw).max(1e-300);
+        for i in 3..6 {
+            m[(i, i)] += ridge * sw * s2 * s2;
+        }
+        for i in 1..3 {
+            m[(i, i)] += 1e-12 * sw * s2;
+        }
+        let x = m.cholesky()?.solve(&b);
+        Some(Quadric { frame, a: [x[0], x[1], x[2], x[3], x[4], x[5]] })
+    }
+}
+
+/// Newton projection of `p` onto the intersection curve of two surfaces: repeatedly moves
+/// by the minimum-norm step that zeroes both linearised functions. Returns None if the
+/// surfaces are (nearly) tangent there or the iteration does not settle.
+pub fn project_to_intersection(p: DVec3, s1: &Quadric, s2: &Quadric, tol: f64) -> Option<DVec3> {
+    let mut x = p;
+    for _ in 0..12 {
+        let (f1, f2) = (s1.value(x), s2.value(x));
+        let (g1, g2) = (s1.gradient(x), s2.gradient(x));
+        // Solve J J^T y = f with J = [g1; g2]; step = J^T y.
+        let (a, b, d) = (g1.dot(g1), g1.dot(g2), g2.dot(g2));
+        let det = a * d - b * b;
+        if det <= 1e-12 * a * d {
+            return None;
+        }
+        let y1 = (d * f1 - b * f2) / det;
+        let y2 = (a * f2 - b * f1) / det;
+        let step = g1 * y1 + g2 * y2;
+        x -= step;
+        if !x.is_finite() {
+            return None;
+        }
+        if step.length() < tol {
+            return Some(x);
+        }
+    }
+    None
+}
+
+/// The point nearest to `p` on which three surfaces meet (Newton on the 3x3 system).
+pub fn project_to_corner(p: DVec3, s: [&Quadric; 3], tol: f64) -> Option<DVec3> {
+    let mut x = p;
+    for _ in 0..12 {
+        let f = DVec3::new(s[0].value(x), s[1].value(x), s[2].value(x));
+        let g = s.map(|q| q.gradient(x));
+        let m = Matrix3::new(g[0].x, g[0].y, g[0].z, g[1].x, g[1].y, g[1].z, g[2].x, g[2].y, g[2].z);
+        // Reject near-singular systems: the three normals must span space.
+        if m.determinant().abs() < 0.05 * g[0].length() * g[1].length() * g[2].length() {
+            return None;
+        }
+        let step = m.lu().solve(&nalgebra::Vector3::new(f.x, f.y, f.z))?;
+        let step = DVec3::new(step[0], step[1], step[2]);
+        x -= step;
+        if step.length() < tol {
+            return Some(x);
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pca_of_a_line() {
+        let pts: Vec<(DVec3, f64)> = (0..10).map(|i| (DVec3::new(i as f64, 2.0 * i as f64, 0.0), 1.0)).collect();
+        let p = Pca::of(pts.iter().copied()).unwrap();
+        assert!((p.axis().dot(DVec3::new(1.0, 2.0, 0.0).normalize()).abs() - 1.0).abs() < 1e-9);
+        assert!(p.linearity() > 0.999);
+    }
+
+    #[test]
+    fn quadric_fits_a_paraboloid_and_newton_meets_two_planes() {
+        let f = Frame::new(DVec3::ZERO, DVec3::Z);
+        let pts: Vec<(DVec3, f64)> = (0..100)
+            .map(|i| {
+                let (u, v) = ((i % 10) as f64 * 0.1 - 0.5, (i / 10) as f64 * 0.1 - 0.5);
+                let l = f.u * u + f.v * v;
+                (l + f.n * (0.3 * u * u - 0.2 * u * v + 0.1), 1.0)
+            })
+            .collect();
+        let q = Quadric::fit(f, pts.iter().copied(), 0.0).unwrap();
+        for &(p, _) in &pts {
+            assert!(q.value(p).abs() < 1e-9);
+        }
+        let a = Quadric::plane(Frame::new(DVec3::ZERO, DVec3::X));
+        let b = Quadric::plane(Frame::new(DVec3::ZERO, DVec3::Y));
+        let e = project_to_intersection(DVec3::new(0.3, -0.2, 0.7), &a, &b, 1e-12).unwrap();
+        assert!((e - DVec3::new(0.0, 0.0, 0.7)).length() < 1e-9);
+        let c = Quadric::plane(Frame::new(DVec3::new(0.0, 0.0, 0.25), DVec3::Z));
+        let k = project_to_corner(DVec3::new(0.1, 0.1, 0.1), [&a, &b, &c], 1e-12).unwrap();
+        assert!((k - DVec3::new(0.0, 0.0, 0.25)).length() < 1e-9);
+    }
+}

@@ -1,0 +1,216 @@
+//! Stage 2: robust projection of candidates onto feature curves (Daniels 2007 section 3.3,
+//! 2008 section 3.3), after the robust MLS of Fleishman et al. 2005.
+//!
+//! The neighbourhood of a candidate is split into smooth, outlier-free sub-neighbourhoods by a
+//! forward search: seeds are small local patches; the patch whose plane has the smallest
+//! low-quantile residual over the remaining points wins (least quantile of squares, which stays
+//! robust when no surface holds half the points, as at corners); it grows to every point within
+//! a noise-scaled threshold, is refined, and is fitted with a quadratic. Its points are removed
+//! and the search repeats. One surface: the candidate is an outlier and is dropped. Two or more:
+//! the candidate is Newton-projected onto the intersection of the two surfaces nearest to it
+//! (an edge point keeping both normals); with three or more, a corner point is also solved.
+//! Projections that move farther than the neighbourhood radius are culled (2008).
+
+use super::cloud::Cloud;
+use super::fit::{project_to_corner, project_to_intersection, Frame, Pca, Quadric};
+use crate::synth::rng::Rng;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// A candidate projected onto the intersection of two surfaces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgePoint {
+    /// Local position on the feature.
+    pub p: DVec3,
+    /// Unit normals of the two surfaces.
+    pub n: [DVec3; 2],
+}
+
+/// A candidate's solution of three surfaces meeting.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CornerPoint {
+    /// Local position of the corner.
+    pub p: DVec3,
+    /// Weight 1 / |corner - edge point| (larger: more trustworthy).
+    pub w: f64,
+}
+
+/// Parameters of the robust projection.
+#[derive(Clone, Copy, Debug)]
+pub struct ProjectParams {
+    /// Neighbourhood radius.
+    pub radius: f64,
+    /// Smallest inlier threshold (model units): curvature and quantisation allowance.
+    pub min_threshold: f64,
+    /// Seed for the deterministic per-candidate random streams.
+    pub seed: u64,
+}
+
+/// What projection made of one candidate.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Projected {
+    /// Edge point, if the candidate lies near two or more surfaces.
+    pub edge: Option<EdgePoint>,
+    /// Corner point, if three or more surfaces meet and their corner is near.
+    pub corner: Option<CornerPoint>,
+    /// Number of surfaces found.
+    pub surfaces: u8,
+}
+
+/// Most neighbours one robust fit looks at.
+const MAX_NEIGHBOURS: usize = 96;
+/// Seeds tried per surface.
+const SEEDS: usize = 16;
+/// Size of a seed patch.
+const SEED_PATCH: usize = 6;
+/// Most surfaces looked for.
+const MAX_SURFACES: usize = 4;
+/// Normals of two distinct surfaces differ by more than this (degrees).
+const MIN_SURFACE_ANGLE: f64 = 8.0;
+
+/// Projects every candidate (by index into `cloud`). `ids` gives each candidate a global
+/// identity so that its random stream does not depend on tiling or thread count.
+pub fn project(cloud: &Cloud, candidates: &[u32], ids: &[u64], p: &ProjectParams) -> Vec<Projected> {
+    candidates
+        .par_iter()
+        .zip(ids.par_iter())
+        .map_init(
+            || (Vec::new(), Scratch::default()),
+            |(buf, scratch), (&i, &id)| project_one(cloud, i as usize, id, p, buf, scratch),
+        )
+        .collect()
+}
+
+#[derive(Default)]
+struct Scratch {
+    pts: Vec<DVec3>,
+    remaining: Vec<usize>,
+    res: Vec<f64>,
+    inl: Vec<usize>,
+    d: Vec<(f64, usize)>,
+}
+
+struct Surface {
+    quad: Quadric,
+    count: usize,
+}
+
+fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Vec<(u32, f32)>, s: &mut Scratch) -> Projected {
+    let x = cloud.at(i);
+    cloud.neighbours(x, p.radius, MAX_NEIGHBOURS, buf);
+    s.pts.clear();
+    s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
+    let n = s.pts.len();
+    let min_count = (n / 10).max(6);
+    if n < 2 * min_count {
+        return Projected::default();
+    }
+    let mut rng = Rng::stream(p.seed, id);
+    s.remaining.clear();
+    s.remaining.extend(0..n);
+    let mut surfaces: Vec<Surface> = Vec::new();
+    while s.remaining.len() >= min_count && surfaces.len() < MAX_SURFACES {
+        let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count) else { break };
+        // A "new" surface parallel to one already found is the same surface's leftovers.
+        let nn = surf.quad.frame.n;
+        let distinct = surfaces.iter().all(|o| o.quad.frame.n.dot(nn).abs() < MIN_SURFACE_ANGLE.to_radians().cos());
+        if distinct {
+            surfaces.push(surf);
+        }
+    }
+    let mut out = Projected { surfaces: surfaces.len() as u8, ..Default::default() };
+    if surfaces.len() < 2 {
+        return out;
+    }
+    // The surfaces nearest to the candidate.
+    surfaces.sort_by(|a, b| a.quad.value(x).abs().total_cmp(&b.quad.value(x).abs()));
+    let tol = 1e-7 * p.radius;
+    let Some(e) = project_to_intersection(x, &surfaces[0].quad, &surfaces[1].quad, tol) else { return out };
+    if e.distance(x) > p.radius {
+        return out;
+    }
+    out.edge = Some(EdgePoint { p: e, n: [surfaces[0].quad.normal(e), surfaces[1].quad.normal(e)] });
+    if surfaces.len() >= 3 {
+        if let Some(c) = project_to_corner(x, [&surfaces[0].quad, &surfaces[1].quad, &surfaces[2].quad], tol) {
+            if c.distance(x) <= p.radius {
+                out.corner = Some(CornerPoint { p: c, w: 1.0 / c.distance(e).max(1e-9 * p.radius) });
+            }
+        }
+    }
+    out
+}
+
+/// Finds the best-supported surface among the remaining points and removes its inliers.
+fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: usize) -> Option<Surface> {
+    let m = s.remaining.len();
+    // Least quantile of squares over seed patches: the quantile is low enough that a surface
+    // holding a quarter of the points can win.
+    let q = (m / 4).max(1);
+    let mut best: Option<(f64, Frame)> = None;
+    for _ in 0..SEEDS {
+        let c = s.remaining[(rng.next_u64() % m as u64) as usize];
+        let pc = s.pts[c];
+        s.d.clear();
+        s.d.extend(s.remaining.iter().map(|&j| (s.pts[j].distance_squared(pc), j)));
+        let k = SEED_PATCH.min(s.d.len());
+        s.d.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+        let Some(pca) = Pca::of(s.d[..k].iter().map(|&(_, j)| (s.pts[j], 1.0))) else { continue };
+        let frame = Frame::new(pca.mean, pca.normal());
+        s.res.clear();
+        s.res.extend(s.remaining.iter().map(|&j| (s.pts[j] - frame.o).dot(frame.n).abs()));
+        let qv = *s.res.select_nth_unstable_by(q - 1, |a, b| a.total_cmp(b)).1;
+        if best.as_ref().map_or(true, |b| qv < b.0) {
+            best = Some((qv, frame));
+        }
+    }
+    let (qv, mut frame) = best?;
+    // The quantile of |residual| over a surface's own points estimates its noise.
+    let mut threshold = (2.5 * qv / 0.674).max(min_threshold);
+    let mut quad = Quadric::plane(frame);
+    for round in 0..3 {
+        s.inl.clear();
+        s.inl.extend(s.remaining.iter().copied().filter(|&j| quad.value(s.pts[j]).abs() <= threshold));
+        if s.inl.len() < min_count {
+            return None;
+        }
+        if round == 2 {
+            break;
+        }
+        let pca = Pca::of(s.inl.iter().map(|&j| (s.pts[j], 1.0)))?;
+        frame = Frame::new(pca.mean, pca.normal());
+        quad = Quadric::fit(frame, s.inl.iter().map(|&j| (s.pts[j], 1.0)), 1e-3)?;
+        let rms = (s.inl.iter().map(|&j| quad.value(s.pts[j]).powi(2)).sum::<f64>() / s.inl.len() as f64).sqrt();
+        threshold = (3.0 * rms).max(min_threshold).min(threshold);
+    }
+    let count = s.inl.len();
+    let inl = &s.inl;
+    s.remaining.retain(|j| inl.binary_search(j).is_err());
+    Some(Surface { quad, count })
+}
+
+/// Groups corner points within `radius`: heaviest first, each group keeps the member nearest
+/// to the group's weighted mean (Daniels 2007). Groups with fewer than `min_support` members are
+/// dropped as accidental.
+pub fn group_corners(corners: &[CornerPoint], radius: f64, min_support: usize) -> Vec<DVec3> {
+    let mut order: Vec<usize> = (0..corners.len()).collect();
+    order.sort_by(|&a, &b| corners[b].w.total_cmp(&corners[a].w).then(a.cmp(&b)));
+    let mut taken = vec![false; corners.len()];
+    let mut out = vec![];
+    for &a in &order {
+        if taken[a] {
+            continue;
+        }
+        let group: Vec<usize> = order.iter().copied().filter(|&b| !taken[b] && corners[b].p.distance(corners[a].p) <= radius).collect();
+        for &b in &group {
+            taken[b] = true;
+        }
+        if group.len() < min_support {
+            continue;
+        }
+        let sw: f64 = group.iter().map(|&b| corners[b].w).sum();
+        let mean = group.iter().map(|&b| corners[b].p * corners[b].w).sum::<DVec3>() / sw;
+        let rep = group.iter().copied().min_by(|&x, &y| corners[x].p.distance(mean).total_cmp(&corners[y].p.distance(mean))).unwrap();
+        out.push(corners[rep].p);
+    }
+    out
+}
