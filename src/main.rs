@@ -51,6 +51,9 @@ struct ParamArgs {
     /// Largest turn while growing, degrees.
     #[arg(long)]
     max_turn: Option<f64>,
+    /// Gentlest crease kept: degrees between the two surface normals (default 25).
+    #[arg(long)]
+    min_angle: Option<f64>,
     /// Random seed of the robust fits.
     #[arg(long)]
     seed: Option<u64>,
@@ -72,6 +75,7 @@ impl ParamArgs {
             tau: self.tau,
             step: self.step,
             max_turn_deg: self.max_turn,
+            min_angle_deg: self.min_angle,
             seed: self.seed,
         })
     }

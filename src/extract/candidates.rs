@@ -6,6 +6,7 @@
 
 use super::cloud::Cloud;
 use super::fit::{Frame, Pca, Quadric};
+use glam::DVec3;
 use rayon::prelude::*;
 
 /// Most neighbours used by one fit (the nearest ones).
@@ -15,11 +16,11 @@ pub const MAX_FIT_NEIGHBOURS: usize = 64;
 pub fn residuals(cloud: &Cloud, which: &[u32], r: f64) -> Vec<f32> {
     which
         .par_iter()
-        .map_init(Vec::new, |buf, &i| residual_at(cloud, i as usize, r, buf))
+        .map_init(|| (Vec::new(), Vec::new()), |(buf, pts), &i| residual_at(cloud, i as usize, r, buf, pts))
         .collect()
 }
 
-fn residual_at(cloud: &Cloud, i: usize, r: f64, buf: &mut Vec<(u32, f32)>) -> f32 {
+fn residual_at(cloud: &Cloud, i: usize, r: f64, buf: &mut Vec<(u32, f32)>, pts: &mut Vec<(DVec3, f64)>) -> f32 {
     let q = cloud.at(i);
     cloud.neighbours(q, r, MAX_FIT_NEIGHBOURS, buf);
     if buf.len() < 8 {
@@ -27,9 +28,10 @@ fn residual_at(cloud: &Cloud, i: usize, r: f64, buf: &mut Vec<(u32, f32)>) -> f3
         return 0.0;
     }
     let h2 = (r * r) / 4.0;
-    let pts = || buf.iter().map(|&(j, d2)| (cloud.at(j as usize), (-(d2 as f64) / h2).exp()));
-    let Some(pca) = Pca::of(pts()) else { return 0.0 };
+    pts.clear();
+    pts.extend(buf.iter().map(|&(j, d2)| (cloud.at(j as usize), (-(d2 as f64) / h2).exp())));
+    let Some(pca) = Pca::of(pts.iter().copied()) else { return 0.0 };
     let frame = Frame::new(pca.mean, pca.normal());
-    let Some(quad) = Quadric::fit(frame, pts(), 1e-6) else { return 0.0 };
-    buf.iter().map(|&(j, _)| quad.value(cloud.at(j as usize)).abs()).fold(0.0, f64::max) as f32
+    let Some(quad) = Quadric::fit(frame, pts.iter().copied(), 1e-6) else { return 0.0 };
+    pts.iter().map(|&(p, _)| quad.value(p).abs()).fold(0.0, f64::max) as f32
 }

@@ -4,13 +4,28 @@ use crate::spatial::Index;
 use glam::{DVec3, Vec3};
 
 /// Points of one tile (core and halo) in local coordinates, indexed for neighbour queries.
+/// Points are stored in Morton (Z-curve) order so that consecutive points are spatial
+/// neighbours and per-point queries stay in cache; `ids` maps back to the caller's order.
 pub struct Cloud {
     /// World position of the local origin.
     pub origin: DVec3,
-    /// Local coordinates.
+    /// Local coordinates, in Morton order.
     pub points: Vec<[f32; 3]>,
+    /// For each stored point, its index in the input slice.
+    pub ids: Vec<u32>,
     /// Neighbour index over `points`.
     pub index: Index,
+}
+
+/// Spreads the low 21 bits of `v` to every third bit.
+fn spread(v: u64) -> u64 {
+    let mut x = v & 0x1f_ffff;
+    x = (x | x << 32) & 0x1f_0000_0000_ffff;
+    x = (x | x << 16) & 0x1f_0000_ff00_00ff;
+    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+    x = (x | x << 2) & 0x1249_2492_4924_9249;
+    x
 }
 
 impl Cloud {
@@ -22,9 +37,18 @@ impl Cloud {
 
     /// Builds a cloud from world positions with a given origin.
     pub fn with_origin(world: &[DVec3], origin: DVec3) -> Cloud {
-        let points: Vec<[f32; 3]> = world.iter().map(|p| (*p - origin).as_vec3().to_array()).collect();
+        let ext = world.iter().fold(0.0f64, |m, p| m.max((*p - origin).max_element()));
+        let q = if ext > 0.0 { ((1u64 << 21) - 1) as f64 / ext } else { 0.0 };
+        let code = |p: DVec3| {
+            let l = ((p - origin) * q).max(DVec3::ZERO);
+            spread(l.x as u64) | spread(l.y as u64) << 1 | spread(l.z as u64) << 2
+        };
+        let mut order: Vec<(u64, u32)> = world.iter().enumerate().map(|(i, p)| (code(*p), i as u32)).collect();
+        order.sort_unstable();
+        let ids: Vec<u32> = order.iter().map(|o| o.1).collect();
+        let points: Vec<[f32; 3]> = ids.iter().map(|&i| (world[i as usize] - origin).as_vec3().to_array()).collect();
         let index = Index::new(&points);
-        Cloud { origin, points, index }
+        Cloud { origin, points, ids, index }
     }
 
     /// Number of points.
@@ -48,11 +72,11 @@ impl Cloud {
     pub fn neighbours(&self, q: DVec3, r: f64, max: usize, out: &mut Vec<(u32, f32)>) {
         out.clear();
         self.index.within(&q.as_vec3().to_array(), r as f32, out);
+        // The tree is built deterministically, so its visiting order (and so every float sum
+        // over the neighbours) does not depend on the thread count.
         if out.len() > max {
             out.select_nth_unstable_by(max, |a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
             out.truncate(max);
         }
-        // A fixed order makes every fit independent of the tree's traversal order.
-        out.sort_unstable_by_key(|a| a.0);
     }
 }

@@ -168,7 +168,7 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams) {
                     }
                 }
                 let Some((_, cj, vi)) = best else { continue };
-                if act(curves, ci, e, cj, vi, cos) {
+                if act(curves, ci, e, cj, vi, cos, reach) {
                     continue 'outer;
                 }
             }
@@ -178,7 +178,7 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams) {
 }
 
 /// Connects end `e` of curve `ci` to vertex `vi` of curve `cj`. Returns true if curves changed.
-fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: f64) -> bool {
+fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: f64, reach: f64) -> bool {
     let (x, t, _) = curves[ci].end(e);
     let target = curves[cj].clone();
     let last = target.v.len() - 1;
@@ -199,8 +199,13 @@ fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: 
             }
             return true;
         }
-        // Two ends at an angle: they meet where their tangent lines pass closest.
-        let c = closest_between_lines(x, t, y, u).unwrap_or((x + y) * 0.5);
+        // Two ends at an angle: they meet where their tangent lines pass closest, if that is
+        // ahead of both and within reach; otherwise they are left alone.
+        let Some(c) = closest_between_lines(x, t, y, u) else { return false };
+        let ok = |z: DVec3, d: DVec3| (c - z).dot(d) >= -0.25 * reach && c.distance(z) <= reach;
+        if !ok(x, t) || !ok(y, u) {
+            return false;
+        }
         curves[ci].push_end(e, c, true);
         curves[cj].push_end(te, c, true);
         return true;

@@ -36,6 +36,9 @@ pub struct Params {
     pub step: Option<f64>,
     /// Largest turn while growing, degrees (default 30).
     pub max_turn_deg: Option<f64>,
+    /// Creases whose surface normals differ by less than this many degrees are ignored
+    /// (default 25).
+    pub min_angle_deg: Option<f64>,
     /// Seed of the robust fits' random streams (default 1).
     pub seed: Option<u64>,
 }
@@ -55,6 +58,8 @@ pub struct Resolved {
     pub step: f64,
     /// Largest turn while growing, degrees.
     pub max_turn_deg: f64,
+    /// Gentlest crease kept, degrees between the surface normals.
+    pub min_angle_deg: f64,
     /// Corner grouping radius.
     pub corner_radius: f64,
     /// Completion search reach, in steps.
@@ -80,6 +85,7 @@ impl Params {
             min_threshold: 0.05 * kappa,
             step,
             max_turn_deg: self.max_turn_deg.unwrap_or(30.0),
+            min_angle_deg: self.min_angle_deg.unwrap_or(25.0),
             corner_radius: rmls,
             reach_steps: 4.0,
             aperture_deg: 45.0,
@@ -169,8 +175,8 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     seconds.candidates = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let ids: Vec<u64> = cand.iter().map(|&i| i as u64).collect();
-    let pp = project::ProjectParams { radius: r.rmls_radius, min_threshold: r.min_threshold, seed: r.seed };
+    let ids: Vec<u64> = cand.iter().map(|&i| cloud.ids[i as usize] as u64).collect();
+    let pp = project::ProjectParams { radius: r.rmls_radius, min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed };
     let projected = project::project(&cloud, &cand, &ids, &pp);
     let edges: Vec<project::EdgePoint> = projected.iter().filter_map(|x| x.edge).collect();
     let corner_pts: Vec<project::CornerPoint> = projected.iter().filter_map(|x| x.corner).collect();

@@ -42,6 +42,9 @@ pub struct ProjectParams {
     pub radius: f64,
     /// Smallest inlier threshold (model units): curvature and quantisation allowance.
     pub min_threshold: f64,
+    /// Two fitted surfaces whose normals differ by less than this (degrees) are one surface:
+    /// creases gentler than this are not features.
+    pub min_angle_deg: f64,
     /// Seed for the deterministic per-candidate random streams.
     pub seed: u64,
 }
@@ -65,8 +68,6 @@ const SEEDS: usize = 16;
 const SEED_PATCH: usize = 6;
 /// Most surfaces looked for.
 const MAX_SURFACES: usize = 4;
-/// Normals of two distinct surfaces differ by more than this (degrees).
-const MIN_SURFACE_ANGLE: f64 = 8.0;
 
 /// Projects every candidate (by index into `cloud`). `ids` gives each candidate a global
 /// identity so that its random stream does not depend on tiling or thread count.
@@ -92,7 +93,6 @@ struct Scratch {
 
 struct Surface {
     quad: Quadric,
-    count: usize,
 }
 
 fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Vec<(u32, f32)>, s: &mut Scratch) -> Projected {
@@ -113,7 +113,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Ve
         let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count) else { break };
         // A "new" surface parallel to one already found is the same surface's leftovers.
         let nn = surf.quad.frame.n;
-        let distinct = surfaces.iter().all(|o| o.quad.frame.n.dot(nn).abs() < MIN_SURFACE_ANGLE.to_radians().cos());
+        let distinct = surfaces.iter().all(|o| o.quad.frame.n.dot(nn).abs() < p.min_angle_deg.to_radians().cos());
         if distinct {
             surfaces.push(surf);
         }
@@ -182,10 +182,9 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
         let rms = (s.inl.iter().map(|&j| quad.value(s.pts[j]).powi(2)).sum::<f64>() / s.inl.len() as f64).sqrt();
         threshold = (3.0 * rms).max(min_threshold).min(threshold);
     }
-    let count = s.inl.len();
     let inl = &s.inl;
     s.remaining.retain(|j| inl.binary_search(j).is_err());
-    Some(Surface { quad, count })
+    Some(Surface { quad })
 }
 
 /// Groups corner points within `radius`: heaviest first, each group keeps the member nearest
