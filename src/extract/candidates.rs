@@ -10,7 +10,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 /// Most neighbours used by one fit (the nearest ones).
-pub const MAX_FIT_NEIGHBOURS: usize = 64;
+pub const MAX_FIT_NEIGHBOURS: usize = 160;
 
 /// The fit residual of every point in `which`, for neighbourhood radius `r`.
 pub fn residuals(cloud: &Cloud, which: &[u32], r: f64) -> Vec<f32> {

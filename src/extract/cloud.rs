@@ -68,15 +68,19 @@ impl Cloud {
     }
 
     /// Indices (and squared distances) of the points within `r` of local position `q`; at most
-    /// `max` of them, chosen deterministically (nearest first) when there are more.
+    /// about `max` of them, an even subsample of the ball when there are more.
     pub fn neighbours(&self, q: DVec3, r: f64, max: usize, out: &mut Vec<(u32, f32)>) {
         out.clear();
         self.index.within(&q.as_vec3().to_array(), r as f32, out);
         // The tree is built deterministically, so its visiting order (and so every float sum
-        // over the neighbours) does not depend on the thread count.
+        // over the neighbours, and this subsample) does not depend on the thread count.
         if out.len() > max {
-            out.select_nth_unstable_by(max, |a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-            out.truncate(max);
+            let stride = out.len().div_ceil(max);
+            let mut k = 0;
+            out.retain(|_| {
+                k += 1;
+                (k - 1) % stride == 0
+            });
         }
     }
 }

@@ -16,6 +16,7 @@ pub mod smooth;
 use crate::curves::{Polyline, Vertex};
 use crate::spatial::Index;
 use cloud::Cloud;
+use fit::Pca;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -46,8 +47,14 @@ pub struct Params {
 /// Parameters with every default resolved to a value.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Resolved {
-    /// Point spacing.
+    /// Point spacing (median nearest-neighbour distance).
     pub kappa: f64,
+    /// Estimated noise: standard deviation of points about their local plane.
+    pub noise: f64,
+    /// Length unit of the defaults: max(kappa, 2 noise), so neighbourhoods outgrow the noise.
+    pub scale: f64,
+    /// Share of points used by the fits (1: all; less when noise makes neighbourhoods large).
+    pub keep: f64,
     /// Candidate fit radius.
     pub fit_radius: f64,
     /// Robust projection radius.
@@ -72,17 +79,26 @@ pub struct Resolved {
     pub seed: u64,
 }
 
+/// Neighbours a fit should see; denser clouds are thinned to about this many.
+pub const TARGET_NEIGHBOURS: f64 = 150.0;
+/// The default length unit is at least this many noise deviations.
+pub const NOISE_SCALE: f64 = 1.5;
+
 impl Params {
-    /// Resolves defaults given the spacing `kappa` (used when not overridden).
-    pub fn resolve(&self, kappa: f64) -> Resolved {
+    /// Resolves defaults given the measured spacing `kappa` and noise `noise`.
+    pub fn resolve(&self, kappa: f64, noise: f64) -> Resolved {
         let kappa = self.kappa.unwrap_or(kappa);
-        let rmls = self.rmls_radius.unwrap_or(9.0 * kappa);
-        let step = self.step.unwrap_or(4.5 * kappa);
+        let scale = kappa.max(NOISE_SCALE * noise);
+        let rmls = self.rmls_radius.unwrap_or(9.0 * scale);
+        let step = self.step.unwrap_or(4.5 * scale);
         Resolved {
             kappa,
-            fit_radius: self.fit_radius.unwrap_or(6.0 * kappa),
+            noise,
+            scale,
+            keep: 1.0,
+            fit_radius: self.fit_radius.unwrap_or(6.0 * scale),
             rmls_radius: rmls,
-            min_threshold: 0.05 * kappa,
+            min_threshold: 0.05 * scale,
             step,
             max_turn_deg: self.max_turn_deg.unwrap_or(30.0),
             min_angle_deg: self.min_angle_deg.unwrap_or(25.0),
@@ -96,8 +112,8 @@ impl Params {
 
     /// The largest neighbourhood radius any stage reads around a point of a tile's core: the
     /// halo a tile needs.
-    pub fn max_radius(&self, kappa: f64) -> f64 {
-        let r = self.resolve(kappa);
+    pub fn max_radius(&self, kappa: f64, noise: f64) -> f64 {
+        let r = self.resolve(kappa, noise);
         r.fit_radius.max(r.rmls_radius)
     }
 }
@@ -160,10 +176,21 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     let t = Instant::now();
     let mut seconds = Timings::default();
     let mut counts = Counts { points: points.len() as u64, ..Default::default() };
-    let cloud = Cloud::new(points);
-    let local: Vec<DVec3> = (0..cloud.len()).map(|i| cloud.at(i)).collect();
+    let full = Cloud::new(points);
+    let local: Vec<DVec3> = (0..full.len()).map(|i| full.at(i)).collect();
     let kappa = params.kappa.unwrap_or_else(|| crate::spacing::median_nn_distance(&local, 20_000));
-    let r = params.resolve(kappa);
+    let noise = noise_sigma(&full, kappa);
+    let mut r = params.resolve(kappa, noise);
+    // Noisy clouds need neighbourhoods wider than the noise; thin them (by a hash of each
+    // point's identity, so the choice is the same in any tile) to keep fits affordable.
+    r.keep = (TARGET_NEIGHBOURS / median_count(&full, r.fit_radius)).min(1.0);
+    let cloud = if r.keep < 0.7 {
+        let kept: Vec<DVec3> = (0..points.len()).filter(|&i| keep_point(i as u64, r.keep, r.seed)).map(|i| points[i]).collect();
+        Cloud::with_origin(&kept, full.origin)
+    } else {
+        full
+    };
+    drop(local);
     seconds.index = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -193,6 +220,15 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     let smoothed = smooth::smooth(&edge_pos, &corners, &sp);
     seconds.smoothing = t.elapsed().as_secs_f64();
 
+    if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
+        let dump = |name: &str, pts: &[DVec3]| {
+            let text: String = pts.iter().map(|p| { let p = *p + cloud.origin; format!("v {} {} {}\n", p.x, p.y, p.z) }).collect();
+            let _ = std::fs::write(std::path::Path::new(&dir).join(name), text);
+        };
+        dump("edges.obj", &edge_pos);
+        dump("smoothed.obj", &smoothed);
+        dump("corners.obj", &corners);
+    }
     let t = Instant::now();
     let grown = grow::grow(&smoothed, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg });
     counts.grown = grown.len() as u64;
@@ -205,6 +241,53 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     counts.curves = curves.len() as u64;
     seconds.completion = t.elapsed().as_secs_f64();
     Extraction { curves, params: r, tau, counts, seconds }
+}
+
+/// Noise estimate: median, over a sample of points, of the standard deviation of their
+/// neighbourhood (radius 16 kappa) about its best-fitting plane.
+pub fn noise_sigma(cloud: &Cloud, kappa: f64) -> f64 {
+    let step = (cloud.len() / 2000).max(1);
+    let mut buf = Vec::new();
+    let mut s: Vec<f64> = (0..cloud.len())
+        .step_by(step)
+        .filter_map(|i| {
+            cloud.neighbours(cloud.at(i), 16.0 * kappa, 128, &mut buf);
+            if buf.len() < 10 {
+                return None;
+            }
+            Pca::of(buf.iter().map(|&(j, _)| (cloud.at(j as usize), 1.0))).map(|p| p.values[2].sqrt())
+        })
+        .collect();
+    if s.is_empty() {
+        return 0.0;
+    }
+    let m = s.len() / 2;
+    *s.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
+}
+
+/// Median number of points within `r` of a sample of points.
+fn median_count(cloud: &Cloud, r: f64) -> f64 {
+    let step = (cloud.len() / 1000).max(1);
+    let mut buf = Vec::new();
+    let mut c: Vec<usize> = (0..cloud.len())
+        .step_by(step)
+        .map(|i| {
+            buf.clear();
+            cloud.index.within(&cloud.points[i], r as f32, &mut buf);
+            buf.len()
+        })
+        .collect();
+    if c.is_empty() {
+        return 1.0;
+    }
+    let m = c.len() / 2;
+    (*c.select_nth_unstable(m).1).max(1) as f64
+}
+
+/// True if point `id` belongs to the thinned cloud keeping share `keep`.
+pub fn keep_point(id: u64, keep: f64, seed: u64) -> bool {
+    let mut r = crate::synth::rng::Rng::stream(seed ^ 0x7417, id);
+    r.f64() < keep
 }
 
 /// Attaches normals (from the nearest edge points, orientation carried along each curve) and

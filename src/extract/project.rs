@@ -61,11 +61,14 @@ pub struct Projected {
 }
 
 /// Most neighbours one robust fit looks at.
-const MAX_NEIGHBOURS: usize = 96;
+const MAX_NEIGHBOURS: usize = 192;
 /// Seeds tried per surface.
 const SEEDS: usize = 16;
-/// Size of a seed patch.
+/// Smallest seed patch; patches hold a tenth of the neighbourhood so that their planes are
+/// meaningful even when noise is larger than the point spacing.
 const SEED_PATCH: usize = 6;
+/// Rounds of exclusive re-assignment and re-fitting.
+const REFINE_ROUNDS: usize = 5;
 /// Most surfaces looked for.
 const MAX_SURFACES: usize = 4;
 
@@ -93,6 +96,8 @@ struct Scratch {
 
 struct Surface {
     quad: Quadric,
+    /// Inlier threshold (noise-scaled distance from the surface).
+    threshold: f64,
 }
 
 fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Vec<(u32, f32)>, s: &mut Scratch) -> Projected {
@@ -124,6 +129,8 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Ve
     }
     // The surfaces nearest to the candidate.
     surfaces.sort_by(|a, b| a.quad.value(x).abs().total_cmp(&b.quad.value(x).abs()));
+    let k = surfaces.len().min(3);
+    refine(&mut surfaces[..k], &s.pts, p.min_threshold);
     let tol = 1e-7 * p.radius;
     let Some(e) = project_to_intersection(x, &surfaces[0].quad, &surfaces[1].quad, tol) else { return out };
     if e.distance(x) > p.radius {
@@ -152,7 +159,7 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
         let pc = s.pts[c];
         s.d.clear();
         s.d.extend(s.remaining.iter().map(|&j| (s.pts[j].distance_squared(pc), j)));
-        let k = SEED_PATCH.min(s.d.len());
+        let k = SEED_PATCH.max(s.pts.len() / 10).min(s.d.len());
         s.d.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
         let Some(pca) = Pca::of(s.d[..k].iter().map(|&(_, j)| (s.pts[j], 1.0))) else { continue };
         let frame = Frame::new(pca.mean, pca.normal());
@@ -176,15 +183,71 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
         if round == 2 {
             break;
         }
-        let pca = Pca::of(s.inl.iter().map(|&j| (s.pts[j], 1.0)))?;
-        frame = Frame::new(pca.mean, pca.normal());
-        quad = Quadric::fit(frame, s.inl.iter().map(|&j| (s.pts[j], 1.0)), 1e-3)?;
-        let rms = (s.inl.iter().map(|&j| quad.value(s.pts[j]).powi(2)).sum::<f64>() / s.inl.len() as f64).sqrt();
+        let (q, rms) = fit_surface(&s.pts, &s.inl, frame.n, min_threshold)?;
+        quad = q;
+        frame = q.frame;
         threshold = (3.0 * rms).max(min_threshold).min(threshold);
     }
     let inl = &s.inl;
     s.remaining.retain(|j| inl.binary_search(j).is_err());
-    Some(Surface { quad })
+    Some(Surface { quad, threshold })
+}
+
+/// Fits a plane, and a quadric over it when curvature (not noise) is what the plane misses:
+/// a noisy half-neighbourhood's quadric extrapolates wildly to the intersection line, so it
+/// is kept only if it at least halves the plane's RMS residual. Returns the surface and its RMS.
+fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f64) -> Option<(Quadric, f64)> {
+    let pca = Pca::of(members.iter().map(|&j| (pts[j], 1.0)))?;
+    let mut n = pca.normal();
+    if n.dot(orient) < 0.0 {
+        n = -n;
+    }
+    let plane = Quadric::plane(Frame::new(pca.mean, n));
+    let rms = |q: &Quadric| (members.iter().map(|&j| q.value(pts[j]).powi(2)).sum::<f64>() / members.len() as f64).sqrt();
+    let rp = rms(&plane);
+    if rp > 0.2 * min_threshold && members.len() >= 12 {
+        if let Some(q) = Quadric::fit(plane.frame, members.iter().map(|&j| (pts[j], 1.0)), 1e-3) {
+            let rq = rms(&q);
+            if rq < 0.5 * rp {
+                return Some((q, rq));
+            }
+        }
+    }
+    Some((plane, rp))
+}
+
+/// Re-fits the surfaces meeting near the candidate on points that unambiguously belong to
+/// each: a point within the threshold of two surfaces (the band along their intersection,
+/// where noise makes membership a guess) is left out, which removes the bias that points of
+/// one surface would give to the other's fit.
+fn refine(surfs: &mut [Surface], pts: &[DVec3], min_threshold: f64) {
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); surfs.len()];
+    for _ in 0..REFINE_ROUNDS {
+        for m in members.iter_mut() {
+            m.clear();
+        }
+        for (j, &q) in pts.iter().enumerate() {
+            let mut hit = None;
+            let mut count = 0;
+            for (k, sf) in surfs.iter().enumerate() {
+                if sf.quad.value(q).abs() <= sf.threshold {
+                    count += 1;
+                    hit = Some(k);
+                }
+            }
+            if count == 1 {
+                members[hit.unwrap()].push(j);
+            }
+        }
+        for (sf, m) in surfs.iter_mut().zip(&members) {
+            if m.len() < 6 {
+                continue;
+            }
+            let Some((q, rms)) = fit_surface(pts, m, sf.quad.frame.n, min_threshold) else { continue };
+            sf.quad = q;
+            sf.threshold = (3.0 * rms).max(min_threshold);
+        }
+    }
 }
 
 /// Groups corner points within `radius`: heaviest first, each group keeps the member nearest
