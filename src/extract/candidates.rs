@@ -11,6 +11,8 @@ use rayon::prelude::*;
 
 /// Most neighbours used by one fit (the nearest ones).
 pub const MAX_FIT_NEIGHBOURS: usize = 160;
+/// Fewest neighbours of a fit: sparse regions widen the neighbourhood to this many.
+pub const MIN_FIT_NEIGHBOURS: usize = 20;
 
 /// The fit residual of every point in `which`, for neighbourhood radius `r`.
 pub fn residuals(cloud: &Cloud, which: &[u32], r: f64) -> Vec<f32> {
@@ -22,12 +24,14 @@ pub fn residuals(cloud: &Cloud, which: &[u32], r: f64) -> Vec<f32> {
 
 fn residual_at(cloud: &Cloud, i: usize, r: f64, buf: &mut Vec<(u32, f32)>, pts: &mut Vec<(DVec3, f64)>) -> f32 {
     let q = cloud.at(i);
-    cloud.neighbours(q, r, MAX_FIT_NEIGHBOURS, buf);
+    cloud.neighbours(q, r, MIN_FIT_NEIGHBOURS, MAX_FIT_NEIGHBOURS, buf);
     if buf.len() < 8 {
         // Too sparse to fit a quadratic: not evidence of a feature.
         return 0.0;
     }
-    let h2 = (r * r) / 4.0;
+    // Gaussian weights on the neighbourhood's own scale (wider where it was widened).
+    let reach2 = buf.iter().map(|&(_, d2)| d2 as f64).fold(r * r, f64::max);
+    let h2 = reach2 / 4.0;
     pts.clear();
     pts.extend(buf.iter().map(|&(j, d2)| (cloud.at(j as usize), (-(d2 as f64) / h2).exp())));
     let Some(pca) = Pca::of(pts.iter().copied()) else { return 0.0 };

@@ -67,11 +67,16 @@ impl Cloud {
         Vec3::from(self.points[i]).as_dvec3()
     }
 
-    /// Indices (and squared distances) of the points within `r` of local position `q`; at most
-    /// about `max` of them, an even subsample of the ball when there are more.
-    pub fn neighbours(&self, q: DVec3, r: f64, max: usize, out: &mut Vec<(u32, f32)>) {
+    /// Indices (and squared distances) of the points within `r` of local position `q`, or the
+    /// `min` nearest where the ball holds fewer (sparse regions of unevenly sampled scans); at
+    /// most about `max` of them, an even subsample of the ball when there are more.
+    pub fn neighbours(&self, q: DVec3, r: f64, min: usize, max: usize, out: &mut Vec<(u32, f32)>) {
         out.clear();
         self.index.within(&q.as_vec3().to_array(), r as f32, out);
+        if out.len() < min {
+            out.clear();
+            self.index.nearest_n(&q.as_vec3().to_array(), min, out);
+        }
         // The tree is built deterministically, so its visiting order (and so every float sum
         // over the neighbours, and this subsample) does not depend on the thread count.
         if out.len() > max {

@@ -178,7 +178,7 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     let mut counts = Counts { points: points.len() as u64, ..Default::default() };
     let full = Cloud::new(points);
     let local: Vec<DVec3> = (0..full.len()).map(|i| full.at(i)).collect();
-    let kappa = params.kappa.unwrap_or_else(|| crate::spacing::median_nn_distance(&local, 20_000));
+    let kappa = params.kappa.unwrap_or_else(|| crate::spacing::spacing(&local, 20_000));
     let noise = noise_sigma(&full, kappa);
     let mut r = params.resolve(kappa, noise);
     // Noisy clouds need neighbourhoods wider than the noise; thin them (by a hash of each
@@ -243,19 +243,24 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     Extraction { curves, params: r, tau, counts, seconds }
 }
 
-/// Noise estimate: median, over a sample of points, of the standard deviation of their
-/// neighbourhood (radius 16 kappa) about its best-fitting plane.
+/// Noise estimate: median, over a sample of points, of the RMS residual of their
+/// neighbourhood (radius 16 kappa) about its best-fitting quadric (a plane would mistake the
+/// curvature of small parts for noise; the quadric's six coefficients absorb little noise from
+/// the hundred-odd points).
 pub fn noise_sigma(cloud: &Cloud, kappa: f64) -> f64 {
     let step = (cloud.len() / 2000).max(1);
     let mut buf = Vec::new();
     let mut s: Vec<f64> = (0..cloud.len())
         .step_by(step)
         .filter_map(|i| {
-            cloud.neighbours(cloud.at(i), 16.0 * kappa, 128, &mut buf);
+            cloud.neighbours(cloud.at(i), 16.0 * kappa, 0, 128, &mut buf);
             if buf.len() < 10 {
                 return None;
             }
-            Pca::of(buf.iter().map(|&(j, _)| (cloud.at(j as usize), 1.0))).map(|p| p.values[2].sqrt())
+            let pts = || buf.iter().map(|&(j, _)| (cloud.at(j as usize), 1.0));
+            let pca = Pca::of(pts())?;
+            let q = fit::Quadric::fit(fit::Frame::new(pca.mean, pca.normal()), pts(), 1e-6)?;
+            Some((pts().map(|(p, _)| q.value(p).powi(2)).sum::<f64>() / buf.len() as f64).sqrt())
         })
         .collect();
     if s.is_empty() {

@@ -62,6 +62,8 @@ pub struct Projected {
 
 /// Most neighbours one robust fit looks at.
 const MAX_NEIGHBOURS: usize = 192;
+/// Fewest neighbours one robust fit looks at (sparse regions widen the ball).
+const MIN_NEIGHBOURS: usize = 40;
 /// Seeds tried per surface.
 const SEEDS: usize = 16;
 /// Smallest seed patch; patches hold a tenth of the neighbourhood so that their planes are
@@ -102,7 +104,7 @@ struct Surface {
 
 fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Vec<(u32, f32)>, s: &mut Scratch) -> Projected {
     let x = cloud.at(i);
-    cloud.neighbours(x, p.radius, MAX_NEIGHBOURS, buf);
+    cloud.neighbours(x, p.radius, MIN_NEIGHBOURS, MAX_NEIGHBOURS, buf);
     s.pts.clear();
     s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
     let n = s.pts.len();
@@ -133,13 +135,14 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Ve
     refine(&mut surfaces[..k], &s.pts, p.min_threshold);
     let tol = 1e-7 * p.radius;
     let Some(e) = project_to_intersection(x, &surfaces[0].quad, &surfaces[1].quad, tol) else { return out };
-    if e.distance(x) > p.radius {
+    let reach = buf.iter().map(|&(_, d2)| (d2 as f64).sqrt()).fold(p.radius, f64::max);
+    if e.distance(x) > reach {
         return out;
     }
     out.edge = Some(EdgePoint { p: e, n: [surfaces[0].quad.normal(e), surfaces[1].quad.normal(e)] });
     if surfaces.len() >= 3 {
         if let Some(c) = project_to_corner(x, [&surfaces[0].quad, &surfaces[1].quad, &surfaces[2].quad], tol) {
-            if c.distance(x) <= p.radius {
+            if c.distance(x) <= reach {
                 out.corner = Some(CornerPoint { p: c, w: 1.0 / c.distance(e).max(1e-9 * p.radius) });
             }
         }
@@ -174,15 +177,17 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
     // The quantile of |residual| over a surface's own points estimates its noise.
     let mut threshold = (2.5 * qv / 0.674).max(min_threshold);
     let mut quad = Quadric::plane(frame);
+    let mut last = usize::MAX;
     for round in 0..3 {
         s.inl.clear();
         s.inl.extend(s.remaining.iter().copied().filter(|&j| quad.value(s.pts[j]).abs() <= threshold));
         if s.inl.len() < min_count {
             return None;
         }
-        if round == 2 {
+        if round == 2 || s.inl.len() == last {
             break;
         }
+        last = s.inl.len();
         let (q, rms) = fit_surface(&s.pts, &s.inl, frame.n, min_threshold)?;
         quad = q;
         frame = q.frame;
@@ -222,7 +227,9 @@ fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f
 /// one surface would give to the other's fit.
 fn refine(surfs: &mut [Surface], pts: &[DVec3], min_threshold: f64) {
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); surfs.len()];
+    let mut previous: Vec<Vec<usize>> = vec![Vec::new(); surfs.len()];
     for _ in 0..REFINE_ROUNDS {
+        std::mem::swap(&mut members, &mut previous);
         for m in members.iter_mut() {
             m.clear();
         }
@@ -238,6 +245,9 @@ fn refine(surfs: &mut [Surface], pts: &[DVec3], min_threshold: f64) {
             if count == 1 {
                 members[hit.unwrap()].push(j);
             }
+        }
+        if members == previous {
+            break;
         }
         for (sf, m) in surfs.iter_mut().zip(&members) {
             if m.len() < 6 {
