@@ -13,6 +13,8 @@ pub struct Cloud {
     pub points: Vec<[f32; 3]>,
     /// For each stored point, its index in the input slice.
     pub ids: Vec<u32>,
+    /// For each stored point, its global identity (stable across tilings).
+    pub gid: Vec<u64>,
     /// Neighbour index over `points`.
     pub index: Index,
 }
@@ -29,14 +31,16 @@ fn spread(v: u64) -> u64 {
 }
 
 impl Cloud {
-    /// Builds a cloud from world positions, with the origin at their minimum corner.
+    /// Builds a cloud from world positions (global ids = their indices), with the origin at
+    /// their minimum corner.
     pub fn new(world: &[DVec3]) -> Cloud {
         let origin = world.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO);
-        Cloud::with_origin(world, origin)
+        let gid: Vec<u64> = (0..world.len() as u64).collect();
+        Cloud::with_origin(world, &gid, origin)
     }
 
-    /// Builds a cloud from world positions with a given origin.
-    pub fn with_origin(world: &[DVec3], origin: DVec3) -> Cloud {
+    /// Builds a cloud from world positions and their global ids, with a given origin.
+    pub fn with_origin(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
         let ext = world.iter().fold(0.0f64, |m, p| m.max((*p - origin).max_element()));
         let q = if ext > 0.0 { ((1u64 << 21) - 1) as f64 / ext } else { 0.0 };
         let code = |p: DVec3| {
@@ -47,8 +51,9 @@ impl Cloud {
         order.sort_unstable();
         let ids: Vec<u32> = order.iter().map(|o| o.1).collect();
         let points: Vec<[f32; 3]> = ids.iter().map(|&i| (world[i as usize] - origin).as_vec3().to_array()).collect();
+        let gid: Vec<u64> = ids.iter().map(|&i| gids[i as usize]).collect();
         let index = Index::new(&points);
-        Cloud { origin, points, ids, index }
+        Cloud { origin, points, ids, gid, index }
     }
 
     /// Number of points.
@@ -77,8 +82,9 @@ impl Cloud {
             out.clear();
             self.index.nearest_n(&q.as_vec3().to_array(), min, out);
         }
-        // The tree is built deterministically, so its visiting order (and so every float sum
-        // over the neighbours, and this subsample) does not depend on the thread count.
+        // Neighbours in global-id order: every fit, subsample and random choice over them is
+        // then the same whatever the tiling or thread count.
+        out.sort_unstable_by_key(|a| self.gid[a.0 as usize]);
         if out.len() > max {
             let stride = out.len().div_ceil(max);
             let mut k = 0;

@@ -171,26 +171,180 @@ pub struct Extraction {
     pub seconds: Timings,
 }
 
-/// Extracts feature curves from `points` (world coordinates) held in memory.
+/// Share of points whose neighbourhoods are measured for kappa and the noise (by id hash).
+pub const STAT_SAMPLES: f64 = 20_000.0;
+
+/// True if point `gid` is one of the statistics sample in a cloud of `total` points.
+pub fn stat_sample(gid: u64, total: u64, seed: u64) -> bool {
+    keep_point(gid ^ 0x5A5A_5A5A, STAT_SAMPLES / total.max(1) as f64, seed)
+}
+
+/// Neighbourhood statistics of one sampled point: its spacing (from the 16th neighbour, see
+/// [`crate::spacing::spacing`]) and the RMS residual of a quadric fitted within 16 of those
+/// spacings (the noise).
+pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<(f64, f64, f64)> {
+    const K: usize = 16;
+    buf.clear();
+    cloud.index.nearest_n(&cloud.points[i], K + 1, buf);
+    if buf.len() < K + 1 {
+        return None;
+    }
+    let rk = (buf.iter().map(|b| b.1).fold(0.0f32, f32::max) as f64).sqrt();
+    let kappa = rk * (2f64.ln() / K as f64).sqrt();
+    buf.clear();
+    cloud.index.within(&cloud.points[i], (16.0 * kappa) as f32, buf);
+    // Points per unit area around this point, from the count in the 16-kappa ball.
+    let density = buf.len() as f64 / (std::f64::consts::PI * (16.0 * kappa).powi(2));
+    cloud.neighbours(cloud.at(i), 16.0 * kappa, 0, 128, buf);
+    if buf.len() < 10 {
+        return Some((kappa, 0.0, density));
+    }
+    // Fit, drop points beyond three robust deviations (outliers), fit again; the noise is the
+    // RMS residual of what remains.
+    let mut pts: Vec<DVec3> = buf.iter().map(|&(j, _)| cloud.at(j as usize)).collect();
+    let mut rms = 0.0;
+    for round in 0..2 {
+        let pca = Pca::of(pts.iter().map(|&p| (p, 1.0)))?;
+        let q = fit::Quadric::fit(fit::Frame::new(pca.mean, pca.normal()), pts.iter().map(|&p| (p, 1.0)), 1e-6)?;
+        let mut res: Vec<f64> = pts.iter().map(|&p| q.value(p).abs()).collect();
+        if round == 1 {
+            rms = (res.iter().map(|r| r * r).sum::<f64>() / res.len() as f64).sqrt();
+            break;
+        }
+        let limit = 3.0 * 1.4826 * median(&mut res.clone());
+        pts.retain(|&p| q.value(p).abs() <= limit);
+        if pts.len() < 10 {
+            return Some((kappa, 0.0, density));
+        }
+        let _ = &mut res;
+    }
+    Some((kappa, rms, density))
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let m = v.len() / 2;
+    *v.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
+}
+
+/// Resolves the parameters from the sampled statistics (spacing, noise, points per unit
+/// area): spacing and noise are their medians; `keep` thins the cloud so that a fit sees about
+/// [`TARGET_NEIGHBOURS`] points.
+pub fn resolve(params: &Params, stats: &[(f64, f64, f64)]) -> Resolved {
+    let mut k: Vec<f64> = stats.iter().map(|s| s.0).collect();
+    let mut n: Vec<f64> = stats.iter().map(|s| s.1).collect();
+    let mut d: Vec<f64> = stats.iter().map(|s| s.2).collect();
+    let mut r = params.resolve(median(&mut k), median(&mut n));
+    let count = median(&mut d) * std::f64::consts::PI * r.fit_radius.powi(2);
+    r.keep = if count > 0.0 { (TARGET_NEIGHBOURS / count).min(1.0) } else { 1.0 };
+    if r.keep >= 0.7 {
+        r.keep = 1.0;
+    }
+    r
+}
+
+/// A point of the edge cloud in world coordinates, with the normals of its two surfaces.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WorldEdge {
+    /// Position.
+    pub p: DVec3,
+    /// Surface normals.
+    pub n: [glam::Vec3; 2],
+}
+
+/// A corner point in world coordinates with its grouping weight.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WorldCorner {
+    /// Position.
+    pub p: DVec3,
+    /// Weight 1 / |corner - edge point|.
+    pub w: f64,
+}
+
+/// Stages 1 and 2 for the points `core` of a tile's cloud (indices into `cloud`), with the
+/// residual threshold `tau` (computed by the caller). Returns edge and corner points in world
+/// coordinates, and the number of candidates and of candidates lying on one surface only.
+pub fn project_core(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> (Vec<WorldEdge>, Vec<WorldCorner>, u64) {
+    let ids: Vec<u64> = candidates.iter().map(|&i| cloud.gid[i as usize]).collect();
+    let pp = project::ProjectParams { radius: r.rmls_radius, min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed };
+    let projected = project::project(cloud, candidates, &ids, &pp);
+    let one = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
+    let o = cloud.origin;
+    let edges = projected.iter().filter_map(|x| x.edge).map(|e| WorldEdge { p: e.p + o, n: [e.n[0].as_vec3(), e.n[1].as_vec3()] }).collect();
+    let corners = projected.iter().filter_map(|x| x.corner).map(|c| WorldCorner { p: c.p + o, w: c.w }).collect();
+    (edges, corners, one)
+}
+
+/// Stages 3 to 5 on the whole edge cloud: corner grouping, smoothing, growing, completion.
+/// Edge points are sorted first so the result does not depend on the order they arrive in.
+pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner>, r: &Resolved, counts: &mut Counts, seconds: &mut Timings) -> Vec<Polyline> {
+    let key = |p: DVec3| p.to_array().map(f64::to_bits);
+    edges.sort_by(|a, b| key(a.p).cmp(&key(b.p)));
+    corners.sort_by(|a, b| key(a.p).cmp(&key(b.p)));
+    counts.edge_points = edges.len() as u64;
+    counts.corner_points = corners.len() as u64;
+    let origin = edges.iter().map(|e| e.p).reduce(DVec3::min).unwrap_or(DVec3::ZERO);
+    let t = Instant::now();
+    let local_corners: Vec<project::CornerPoint> = corners.iter().map(|c| project::CornerPoint { p: c.p - origin, w: c.w }).collect();
+    let grouped = project::group_corners(&local_corners, r.corner_radius, 3);
+    counts.corners = grouped.len() as u64;
+    let local: Vec<project::EdgePoint> = edges.iter().map(|e| project::EdgePoint { p: e.p - origin, n: [e.n[0].as_dvec3(), e.n[1].as_dvec3()] }).collect();
+    let edge_pos: Vec<DVec3> = local.iter().map(|e| e.p).collect();
+    let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: 2.0 * r.rmls_radius };
+    let smoothed = smooth::smooth(&edge_pos, &grouped, &sp);
+    seconds.smoothing = t.elapsed().as_secs_f64();
+    if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
+        let dump = |name: &str, pts: &[DVec3]| {
+            let text: String = pts.iter().map(|p| { let p = *p + origin; format!("v {} {} {}\n", p.x, p.y, p.z) }).collect();
+            let _ = std::fs::write(std::path::Path::new(&dir).join(name), text);
+        };
+        dump("edges.obj", &edge_pos);
+        dump("smoothed.obj", &smoothed);
+        dump("corners.obj", &grouped);
+    }
+    let t = Instant::now();
+    let grown = grow::grow(&smoothed, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg });
+    counts.grown = grown.len() as u64;
+    seconds.growing = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2 };
+    let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), &grouped, &cp);
+    let curves = to_polylines(&curves, &smoothed, &local, origin, r.step);
+    counts.curves = curves.len() as u64;
+    seconds.completion = t.elapsed().as_secs_f64();
+    curves
+}
+
+/// Extracts feature curves from `points` (world coordinates) held in memory: the whole cloud
+/// is one tile.
 pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     let t = Instant::now();
     let mut seconds = Timings::default();
     let mut counts = Counts { points: points.len() as u64, ..Default::default() };
+    let gids: Vec<u64> = (0..points.len() as u64).collect();
     let full = Cloud::new(points);
-    let local: Vec<DVec3> = (0..full.len()).map(|i| full.at(i)).collect();
-    let kappa = params.kappa.unwrap_or_else(|| crate::spacing::spacing(&local, 20_000));
-    let noise = noise_sigma(&full, kappa);
-    let mut r = params.resolve(kappa, noise);
+    let seed = params.seed.unwrap_or(1);
+    let mut buf = Vec::new();
+    let stats: Vec<(f64, f64, f64)> = (0..full.len())
+        .filter(|&i| stat_sample(full.gid[i], points.len() as u64, seed))
+        .filter_map(|i| point_stats(&full, i, &mut buf))
+        .collect();
+    let mut r = resolve(params, &stats);
+    if let Some(k) = params.kappa {
+        r.kappa = k;
+    }
     // Noisy clouds need neighbourhoods wider than the noise; thin them (by a hash of each
     // point's identity, so the choice is the same in any tile) to keep fits affordable.
-    r.keep = (TARGET_NEIGHBOURS / median_count(&full, r.fit_radius)).min(1.0);
-    let cloud = if r.keep < 0.7 {
-        let kept: Vec<DVec3> = (0..points.len()).filter(|&i| keep_point(i as u64, r.keep, r.seed)).map(|i| points[i]).collect();
-        Cloud::with_origin(&kept, full.origin)
+    let cloud = if r.keep < 1.0 {
+        let keep: Vec<usize> = (0..points.len()).filter(|&i| keep_point(gids[i], r.keep, r.seed)).collect();
+        let kept: Vec<DVec3> = keep.iter().map(|&i| points[i]).collect();
+        let kept_ids: Vec<u64> = keep.iter().map(|&i| gids[i]).collect();
+        Cloud::with_origin(&kept, &kept_ids, full.origin)
     } else {
         full
     };
-    drop(local);
     seconds.index = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -202,95 +356,18 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     seconds.candidates = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let ids: Vec<u64> = cand.iter().map(|&i| cloud.ids[i as usize] as u64).collect();
-    let pp = project::ProjectParams { radius: r.rmls_radius, min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed };
-    let projected = project::project(&cloud, &cand, &ids, &pp);
-    let edges: Vec<project::EdgePoint> = projected.iter().filter_map(|x| x.edge).collect();
-    let corner_pts: Vec<project::CornerPoint> = projected.iter().filter_map(|x| x.corner).collect();
-    counts.one_surface = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
-    counts.edge_points = edges.len() as u64;
-    counts.corner_points = corner_pts.len() as u64;
-    let corners = project::group_corners(&corner_pts, r.corner_radius, 3);
-    counts.corners = corners.len() as u64;
+    let (edges, corners, one) = project_core(&cloud, &cand, &r);
+    counts.one_surface = one;
     seconds.projection = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let edge_pos: Vec<DVec3> = edges.iter().map(|e| e.p).collect();
-    let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: 2.0 * r.rmls_radius };
-    let smoothed = smooth::smooth(&edge_pos, &corners, &sp);
-    seconds.smoothing = t.elapsed().as_secs_f64();
-
-    if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
-        let dump = |name: &str, pts: &[DVec3]| {
-            let text: String = pts.iter().map(|p| { let p = *p + cloud.origin; format!("v {} {} {}\n", p.x, p.y, p.z) }).collect();
-            let _ = std::fs::write(std::path::Path::new(&dir).join(name), text);
-        };
-        dump("edges.obj", &edge_pos);
-        dump("smoothed.obj", &smoothed);
-        dump("corners.obj", &corners);
-    }
-    let t = Instant::now();
-    let grown = grow::grow(&smoothed, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg });
-    counts.grown = grown.len() as u64;
-    seconds.growing = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2 };
-    let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), &corners, &cp);
-    let curves = to_polylines(&curves, &smoothed, &edges, cloud.origin, r.step);
-    counts.curves = curves.len() as u64;
-    seconds.completion = t.elapsed().as_secs_f64();
+    let curves = curves_from_edges(edges, corners, &r, &mut counts, &mut seconds);
     Extraction { curves, params: r, tau, counts, seconds }
-}
-
-/// Noise estimate: median, over a sample of points, of the RMS residual of their
-/// neighbourhood (radius 16 kappa) about its best-fitting quadric (a plane would mistake the
-/// curvature of small parts for noise; the quadric's six coefficients absorb little noise from
-/// the hundred-odd points).
-pub fn noise_sigma(cloud: &Cloud, kappa: f64) -> f64 {
-    let step = (cloud.len() / 2000).max(1);
-    let mut buf = Vec::new();
-    let mut s: Vec<f64> = (0..cloud.len())
-        .step_by(step)
-        .filter_map(|i| {
-            cloud.neighbours(cloud.at(i), 16.0 * kappa, 0, 128, &mut buf);
-            if buf.len() < 10 {
-                return None;
-            }
-            let pts = || buf.iter().map(|&(j, _)| (cloud.at(j as usize), 1.0));
-            let pca = Pca::of(pts())?;
-            let q = fit::Quadric::fit(fit::Frame::new(pca.mean, pca.normal()), pts(), 1e-6)?;
-            Some((pts().map(|(p, _)| q.value(p).powi(2)).sum::<f64>() / buf.len() as f64).sqrt())
-        })
-        .collect();
-    if s.is_empty() {
-        return 0.0;
-    }
-    let m = s.len() / 2;
-    *s.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
-}
-
-/// Median number of points within `r` of a sample of points.
-fn median_count(cloud: &Cloud, r: f64) -> f64 {
-    let step = (cloud.len() / 1000).max(1);
-    let mut buf = Vec::new();
-    let mut c: Vec<usize> = (0..cloud.len())
-        .step_by(step)
-        .map(|i| {
-            buf.clear();
-            cloud.index.within(&cloud.points[i], r as f32, &mut buf);
-            buf.len()
-        })
-        .collect();
-    if c.is_empty() {
-        return 1.0;
-    }
-    let m = c.len() / 2;
-    (*c.select_nth_unstable(m).1).max(1) as f64
 }
 
 /// True if point `id` belongs to the thinned cloud keeping share `keep`.
 pub fn keep_point(id: u64, keep: f64, seed: u64) -> bool {
+    if keep >= 1.0 {
+        return true;
+    }
     let mut r = crate::synth::rng::Rng::stream(seed ^ 0x7417, id);
     r.f64() < keep
 }
