@@ -125,6 +125,8 @@ pub struct PointChunk {
     pub xyz: Vec<DVec3>,
     /// ASPRS classification codes, one per point.
     pub class: Vec<u8>,
+    /// Record index of each point in its file (points dropped by filters leave gaps).
+    pub index: Vec<u64>,
 }
 
 impl PointChunk {
@@ -142,5 +144,6 @@ impl PointChunk {
     pub fn clear(&mut self) {
         self.xyz.clear();
         self.class.clear();
+        self.index.clear();
     }
 }

@@ -22,6 +22,9 @@ pub enum Error {
     /// The user asked for something that cannot be done (bad argument combination, bad value).
     #[error("{0}")]
     Usage(String),
+    /// The run was stopped by Ctrl-C or SIGTERM; its directory can be resumed.
+    #[error("interrupted; run the same command again to continue")]
+    Interrupted,
     /// Writing an output failed.
     #[error("{}: {source}", path.display())]
     Output {
@@ -48,6 +51,7 @@ impl Error {
         match self {
             Error::Input { .. } | Error::Usage(_) => 2,
             Error::Output { .. } => 1,
+            Error::Interrupted => 130,
         }
     }
 }

@@ -12,9 +12,11 @@ pub mod extract;
 pub mod info;
 pub mod io;
 pub mod mem;
+pub mod progress;
 pub mod run;
 pub mod spacing;
 pub mod spatial;
 pub mod synth;
+pub mod tiles;
 
 pub use error::{Error, Result};

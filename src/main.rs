@@ -118,9 +118,30 @@ enum Cmd {
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Memory budget, e.g. 1G or 512M (default: half of the machine's memory); sets the
+        /// tile size.
+        #[arg(long, value_parser = parse_size)]
+        memory: Option<u64>,
+        /// Tile edge length in model units (overrides the size derived from --memory).
+        #[arg(long)]
+        tile_size: Option<f64>,
+        /// Start over if the output directory holds a different run.
+        #[arg(long)]
+        force: bool,
+        /// Process each input file on its own, with outputs in OUT/<file stem>/.
+        #[arg(long)]
+        per_file: bool,
         /// Print nothing but errors.
         #[arg(long, short)]
         quiet: bool,
+    },
+    /// Tells what a run directory has done and what is left.
+    Status {
+        /// The run directory.
+        dir: PathBuf,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
     },
     /// Scores extracted curves against ground truth.
     Eval {
@@ -233,6 +254,24 @@ enum SynthCmd {
     },
 }
 
+/// Parses sizes such as 1G, 512M, 2.5GB, 1000000 (bytes).
+fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim().to_ascii_uppercase();
+    let t = t.strip_suffix('B').unwrap_or(&t);
+    let (num, mul) = match t.chars().last() {
+        Some('K') => (&t[..t.len() - 1], 1u64 << 10),
+        Some('M') => (&t[..t.len() - 1], 1 << 20),
+        Some('G') => (&t[..t.len() - 1], 1 << 30),
+        Some('T') => (&t[..t.len() - 1], 1 << 40),
+        _ => (t, 1),
+    };
+    let v: f64 = num.parse().map_err(|_| format!("'{s}' is not a size (e.g. 1G, 512M)"))?;
+    if !(v > 0.0) {
+        return Err(format!("'{s}' must be positive"));
+    }
+    Ok((v * mul as f64) as u64)
+}
+
 fn read_curves(path: &std::path::Path) -> Result<Vec<crease::curves::Polyline>, Error> {
     match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
         Some("ply") => crease::curves::read_ply(path),
@@ -285,16 +324,50 @@ fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Cmd::Synth { what } => synth_cmd(what)?,
-        Cmd::Extract { paths, out, filter, params, threads, quiet } => {
+        Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet } => {
             if let Some(n) = threads {
                 rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
             }
-            let r = crease::run::run_extract(&paths, &out, &params.params()?, &filter.filter())?;
-            if !quiet {
-                eprintln!(
-                    "{} curves from {} points in {:.2} s (kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
-                    r.counts.curves, r.counts.points, r.total_seconds, r.params.kappa, r.tau, r.counts.candidates, r.counts.edge_points, r.counts.corners, out.display()
-                );
+            if let Some(t) = tile_size {
+                if !(t > 0.0 && t.is_finite()) {
+                    return Err(Error::Usage("--tile-size must be a positive number".into()));
+                }
+            }
+            let _ = ctrlc::set_handler(|| crease::run::STOP.store(true, std::sync::atomic::Ordering::SeqCst));
+            let opts = crease::run::RunOptions {
+                memory: memory.unwrap_or_else(|| (crease::mem::total_memory() / 2).max(256 << 20)),
+                tile_size,
+                force,
+                progress: if quiet { crease::progress::Mode::Quiet } else { crease::progress::Mode::Auto },
+            };
+            let params = params.params()?;
+            let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {
+                crease::io::expand_inputs(&paths)?
+                    .into_iter()
+                    .map(|f| {
+                        let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                        (vec![f], out.join(stem))
+                    })
+                    .collect()
+            } else {
+                vec![(paths, out)]
+            };
+            for (inputs, dir) in jobs {
+                let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter(), &opts)?;
+                if !quiet {
+                    eprintln!(
+                        "{} curves from {} points in {:.2} s ({} tiles{}; kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
+                        r.counts.curves, r.counts.points, r.total_seconds, r.tiles, if r.resumed { ", resumed" } else { "" }, r.params.kappa, r.tau, r.counts.candidates, r.counts.edge_points, r.counts.corners, dir.display()
+                    );
+                }
+            }
+        }
+        Cmd::Status { dir, json } => {
+            let s = crease::run::status(&dir)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&s).expect("status serialises"));
+            } else {
+                print!("{}", crease::run::render_status(&s));
             }
         }
     }

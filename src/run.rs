@@ -1,15 +1,96 @@
-//! The `extract` job: read the inputs, extract curves, write the outputs and a report.
+//! The `extract` job over a resumable run directory: plan, bucket into tiles, per-tile passes
+//! (statistics, residuals, projection), then the curve stages on the gathered edge cloud.
+//!
+//! Run directory layout:
+//! - `manifest.json`: the job (inputs with size, mtime and header checksum; parameters; crease
+//!   version), the plan (grid), and what is done;
+//! - `tiles/`: bucketed points; `stats/`, `resid/`, `edges/`: one result file per tile and pass;
+//! - `curves.obj`, `curves.ply`, `curves.geojson`, `report.json`: the outputs.
+//!
+//! Every file is written to a temporary name, synced and renamed, and only then counted as
+//! done, so a run killed at any moment resumes where it stopped and ends with the same curves.
 
-use crate::cloud::{Crs, CloudHeader};
+use crate::cloud::{Bounds, CloudHeader, Crs, PointChunk};
 use crate::curves::{write_geojson, write_obj, write_ply};
 use crate::error::{Error, Result};
-use crate::extract::{self, Counts, Params, Resolved, Timings};
-use crate::io::{self, Filter};
-use serde::Serialize;
+use crate::extract::{self, cloud::Cloud, Counts, Params, Resolved, Timings, WorldCorner, WorldEdge};
+use crate::io::{self, Filter, PointReader};
+use crate::tiles::{within, Bucketer, Grid, Store, TilePoints};
+use glam::{DVec3, Vec3};
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-/// What `crease extract` writes to `report.json`.
+/// Bytes of memory a tile point costs while processed (points, tree, per-stage arrays, the
+/// halo share and the prefetched next tile).
+pub const BYTES_PER_POINT: u64 = 600;
+
+/// How to run a job.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Job {
+    /// crease version.
+    pub version: String,
+    /// Input files with their stamps.
+    pub inputs: Vec<InputStamp>,
+    /// Method parameters as given.
+    pub params: Params,
+    /// Classes kept (all if None).
+    pub classes: Option<Vec<u8>>,
+    /// Keep withheld and noise points.
+    pub keep_noise: bool,
+    /// Tile edge length, if given.
+    pub tile_size: Option<f64>,
+    /// Memory budget in bytes.
+    pub memory: u64,
+}
+
+/// What identifies an input file's content.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct InputStamp {
+    /// Path as given.
+    pub path: PathBuf,
+    /// Size in bytes.
+    pub size: u64,
+    /// Modification time, nanoseconds since the epoch.
+    pub mtime_ns: i128,
+    /// FNV-1a hash of the first 64 KiB (header and VLRs).
+    pub header_hash: String,
+}
+
+/// State of a run directory.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Manifest {
+    /// The job.
+    pub job: Job,
+    /// Tile grid.
+    pub grid: Grid,
+    /// Points the headers declare.
+    pub declared_points: u64,
+    /// Bucketing finished.
+    pub bucketed: bool,
+    /// Points per tile after filtering.
+    pub tile_points: Vec<u64>,
+    /// Parameters resolved from the statistics pass.
+    pub resolved: Option<Resolved>,
+    /// Outputs written.
+    pub finished: bool,
+}
+
+/// Options of a run beyond the method parameters.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// Memory budget in bytes.
+    pub memory: u64,
+    /// Tile edge length override.
+    pub tile_size: Option<f64>,
+    /// Start over even if the directory holds a different job.
+    pub force: bool,
+    /// Progress output.
+    pub progress: crate::progress::Mode,
+}
+
+/// What `report.json` holds.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
     /// crease version.
@@ -22,18 +103,98 @@ pub struct Report {
     pub tau: f64,
     /// Counts per stage.
     pub counts: Counts,
-    /// Seconds per stage (plus reading and writing).
+    /// Seconds per stage.
     pub seconds: Timings,
-    /// Seconds spent reading the inputs.
-    pub read_seconds: f64,
-    /// Seconds spent writing the outputs.
-    pub write_seconds: f64,
-    /// Total wall-clock seconds.
+    /// Seconds per pass of this invocation (bucketing, statistics, residuals, projection,
+    /// curves, writing); passes finished by an earlier invocation count 0.
+    pub pass_seconds: PassSeconds,
+    /// Total wall-clock seconds of this invocation.
     pub total_seconds: f64,
-    /// Peak resident memory in bytes.
+    /// Peak resident memory of this invocation, bytes.
     pub peak_rss_bytes: u64,
     /// Worker threads.
     pub threads: usize,
+    /// Tiles in the grid.
+    pub tiles: usize,
+    /// Tile edge length.
+    pub tile_size: f64,
+    /// Halo width.
+    pub halo: f64,
+    /// True if this invocation continued an interrupted run.
+    pub resumed: bool,
+}
+
+/// Seconds per pass.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PassSeconds {
+    /// Reading and bucketing the inputs.
+    pub bucketing: f64,
+    /// Spacing and noise statistics.
+    pub statistics: f64,
+    /// Stage 1 over all tiles.
+    pub residuals: f64,
+    /// Stage 2 over all tiles.
+    pub projection: f64,
+    /// Stages 3-5 on the edge cloud.
+    pub curves: f64,
+    /// Writing outputs.
+    pub writing: f64,
+}
+
+/// Set by Ctrl-C / SIGTERM: passes stop after the tile in hand.
+pub static STOP: AtomicBool = AtomicBool::new(false);
+
+/// The error returned when a run was interrupted (exit code 130).
+pub fn interrupted() -> Error {
+    Error::Interrupted
+}
+
+fn check_stop() -> Result<()> {
+    if STOP.load(Ordering::SeqCst) {
+        Err(interrupted())
+    } else {
+        Ok(())
+    }
+}
+
+/// FNV-1a, 64 bit: a stable content hash (std's hasher may change between Rust versions).
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+fn stamp(path: &Path) -> Result<InputStamp> {
+    use std::io::Read;
+    let meta = std::fs::metadata(path).map_err(|e| crate::error::io_input(path, e))?;
+    let mtime_ns = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos() as i128);
+    let mut head = vec![0u8; 65536.min(meta.len() as usize)];
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut head)).map_err(|e| crate::error::io_input(path, e))?;
+    Ok(InputStamp { path: path.to_path_buf(), size: meta.len(), mtime_ns, header_hash: format!("{:016x}", fnv1a(&head)) })
+}
+
+/// Writes `bytes` to `path` atomically: temporary file, fsync, rename, fsync of the directory.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let tmp = path.with_extension("tmp");
+    let r = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)?;
+        if let Some(dir) = path.parent() {
+            std::fs::File::open(dir)?.sync_all()?;
+        }
+        Ok(())
+    })();
+    r.map_err(|e| Error::output(path, e))
 }
 
 /// One CRS for all inputs, or an error naming the file that disagrees.
@@ -50,39 +211,496 @@ pub fn common_crs(headers: &[CloudHeader]) -> Result<Crs> {
     Ok(Crs::default())
 }
 
-/// Runs extraction on `inputs` (files or directories) and writes everything to `out_dir`.
-pub fn run_extract(inputs: &[PathBuf], out_dir: &Path, params: &Params, filter: &Filter) -> Result<Report> {
+/// Describes how two jobs differ, for the refusal message.
+fn job_difference(old: &Job, new: &Job) -> String {
+    if old.version != new.version {
+        return format!("crease version changed ({} -> {})", old.version, new.version);
+    }
+    if old.inputs.len() != new.inputs.len() {
+        return format!("the inputs changed ({} files -> {})", old.inputs.len(), new.inputs.len());
+    }
+    for (a, b) in old.inputs.iter().zip(&new.inputs) {
+        if a.path != b.path {
+            return format!("input {} is now {}", a.path.display(), b.path.display());
+        }
+        if a.size != b.size || a.header_hash != b.header_hash || a.mtime_ns != b.mtime_ns {
+            return format!("input {} changed since the run started (size, time or header)", a.path.display());
+        }
+    }
+    if old.params != new.params {
+        return "the method parameters changed".to_string();
+    }
+    if old.classes != new.classes || old.keep_noise != new.keep_noise {
+        return "the point filters changed".to_string();
+    }
+    if old.tile_size != new.tile_size || old.memory != new.memory {
+        return "the tiling (--tile-size or --memory) changed".to_string();
+    }
+    "the job changed".to_string()
+}
+
+fn manifest_path(dir: &Path) -> PathBuf {
+    dir.join("manifest.json")
+}
+
+/// Reads the manifest of a run directory, if there is one.
+pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>> {
+    let p = manifest_path(dir);
+    match std::fs::read(&p) {
+        Ok(b) => serde_json::from_slice(&b).map(Some).map_err(|e| Error::input(&p, format!("unreadable manifest: {e}"))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(Error::input(&p, e.to_string())),
+    }
+}
+
+fn save(dir: &Path, m: &Manifest) -> Result<()> {
+    write_atomic(&manifest_path(dir), serde_json::to_string_pretty(m).expect("manifest serialises").as_bytes())
+}
+
+/// Tile edge length for a budget: tiles hold about `memory / BYTES_PER_POINT` points, assuming
+/// the points spread evenly over the footprint (2D) or the volume (3D) of the bounds.
+pub fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
+    let per_tile = (memory / BYTES_PER_POINT).max(10_000) as f64;
+    let ext = DVec3::from(b.max) - DVec3::from(b.min);
+    let ext = ext.max(DVec3::splat(1e-9));
+    let tiles = (points as f64 / per_tile).max(1.0);
+    let flat = ext.z < 0.25 * ext.x.max(ext.y);
+    let size = if flat { (ext.x * ext.y / tiles).sqrt() } else { (ext.x * ext.y * ext.z / tiles).cbrt() };
+    // Never more than needed to hold everything in one tile.
+    size.min(ext.max_element() * 1.001)
+}
+
+/// Runs (or resumes) extraction of `inputs` into the run directory `dir`.
+pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
     let files = io::expand_inputs(inputs)?;
     let headers = files.iter().map(|f| io::read_header(f)).collect::<Result<Vec<_>>>()?;
     let crs = common_crs(&headers)?;
-    let cloud = io::read_all(&files, filter)?;
-    if cloud.len() < 10 {
-        return Err(Error::input(&files[0], format!("only {} points after filtering: nothing to extract", cloud.len())));
+    let job = Job {
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        inputs: files.iter().map(|f| stamp(f)).collect::<Result<_>>()?,
+        params: params.clone(),
+        classes: filter.classes.clone(),
+        keep_noise: filter.keep_noise,
+        tile_size: opts.tile_size,
+        memory: opts.memory,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    let mut resumed = false;
+    let mut manifest = match read_manifest(dir)? {
+        Some(m) if m.job == job => {
+            resumed = true;
+            m
+        }
+        Some(m) if !opts.force => {
+            return Err(Error::Usage(format!(
+                "{}: holds a different run: {}; use --force to start over",
+                dir.display(),
+                job_difference(&m.job, &job)
+            )))
+        }
+        _ => {
+            for sub in ["tiles", "stats", "resid", "edges"] {
+                let _ = std::fs::remove_dir_all(dir.join(sub));
+            }
+            for f in ["curves.obj", "curves.ply", "curves.geojson", "report.json"] {
+                let _ = std::fs::remove_file(dir.join(f));
+            }
+            let mut b = Bounds::EMPTY;
+            let mut declared = 0;
+            for h in &headers {
+                let hb = if h.bounds.is_empty() { io::scan_bounds(&h.path)?.0 } else { h.bounds };
+                b.union(&hb);
+                declared += h.count;
+            }
+            if b.is_empty() {
+                return Err(Error::input(&files[0], "no points"));
+            }
+            let size = opts.tile_size.unwrap_or_else(|| tile_size_for(&b, declared, opts.memory));
+            let m = Manifest { job: job.clone(), grid: Grid::new(&b, size), declared_points: declared, bucketed: false, tile_points: vec![], resolved: None, finished: false };
+            save(dir, &m)?;
+            m
+        }
+    };
+    let progress = crate::progress::Progress::new(opts.progress);
+    let mut pass = PassSeconds::default();
+    let store = Store::new(&dir.join("tiles"))?;
+
+    // Bucketing: all or nothing (a partial store is discarded on resume).
+    if !manifest.bucketed {
+        let t = Instant::now();
+        let _ = std::fs::remove_dir_all(dir.join("tiles"));
+        let store = Store::new(&dir.join("tiles"))?;
+        let budget = (opts.memory / 4 / 48) as usize;
+        let mut b = Bucketer::new(&manifest.grid, &store, budget);
+        let bar = progress.bar("bucketing", manifest.declared_points, "points");
+        let mut chunk = PointChunk::default();
+        let mut gids = Vec::new();
+        for (fi, f) in files.iter().enumerate() {
+            let mut r = PointReader::open(f, filter)?;
+            // Global ids: file index in the high bits, record index in the low 40 bits.
+            loop {
+                let n = r.read_chunk(io::DEFAULT_CHUNK, &mut chunk)?;
+                if n == 0 {
+                    break;
+                }
+                gids.clear();
+                gids.extend(chunk.index.iter().map(|&i| ((fi as u64) << 40) | i));
+                b.add(&chunk, &gids)?;
+                bar.inc(n as u64);
+                check_stop()?;
+            }
+        }
+        b.flush()?;
+        store.sync()?;
+        bar.finish();
+        manifest.tile_points = b.counts.clone();
+        manifest.bucketed = true;
+        save(dir, &manifest)?;
+        pass.bucketing = t.elapsed().as_secs_f64();
     }
-    let read_seconds = t0.elapsed().as_secs_f64();
-    let ex = extract::extract(&cloud.xyz, params);
+    let total: u64 = manifest.tile_points.iter().sum();
+    if total < 10 {
+        return Err(Error::input(&files[0], format!("only {total} points after filtering: nothing to extract")));
+    }
+    let grid = manifest.grid.clone();
+    let tiles: Vec<u32> = (0..grid.len() as u32).filter(|&t| manifest.tile_points[t as usize] > 0).collect();
+    let seed = params.seed.unwrap_or(1);
+
+    // Statistics pass: spacing, noise and density at sampled points, with a halo wide enough
+    // for the 16-kappa noise fit (kappa from a probe of the fullest tile).
     let t = Instant::now();
-    std::fs::create_dir_all(out_dir).map_err(|e| Error::output(out_dir, e))?;
-    write_obj(&out_dir.join("curves.obj"), &ex.curves)?;
-    write_ply(&out_dir.join("curves.ply"), &ex.curves)?;
-    write_geojson(&out_dir.join("curves.geojson"), &ex.curves, &crs)?;
-    let write_seconds = t.elapsed().as_secs_f64();
+    let resolved = match &manifest.resolved {
+        Some(r) => r.clone(),
+        None => {
+            let fullest = *tiles.iter().max_by_key(|&&t| (manifest.tile_points[t as usize], std::cmp::Reverse(t))).unwrap();
+            let mut probe = TilePoints::default();
+            store.read(fullest, &mut probe, |_, _| true)?;
+            let kappa0 = crate::spacing::spacing(&probe.xyz, 2000);
+            drop(probe);
+            let halo0 = 24.0 * kappa0;
+            let sdir = dir.join("stats");
+            std::fs::create_dir_all(&sdir).map_err(|e| Error::output(&sdir, e))?;
+            tile_pass(&progress, "statistics", &tiles, &sdir, |t| {
+                let (tp, core) = load(&store, &grid, t, halo0, 1.0, seed)?;
+                let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
+                let mut buf = Vec::new();
+                let mut out: Vec<u8> = Vec::new();
+                for i in 0..cloud.len() {
+                    if core[cloud.ids[i] as usize] && extract::stat_sample(cloud.gid[i], total, seed) {
+                        if let Some(s) = extract::point_stats(&cloud, i, &mut buf) {
+                            for v in [s.0, s.1, s.2] {
+                                out.extend_from_slice(&v.to_le_bytes());
+                            }
+                        }
+                    }
+                }
+                Ok(out)
+            })?;
+            let mut stats = vec![];
+            for &t in &tiles {
+                let b = read_result(&sdir, t)?;
+                for c in b.chunks_exact(24) {
+                    let v = |o: usize| f64::from_le_bytes(c[o..o + 8].try_into().unwrap());
+                    stats.push((v(0), v(8), v(16)));
+                }
+            }
+            let mut r = extract::resolve(params, &stats);
+            if let Some(k) = params.kappa {
+                r.kappa = k;
+            }
+            manifest.resolved = Some(r.clone());
+            save(dir, &manifest)?;
+            r
+        }
+    };
+    pass.statistics = t.elapsed().as_secs_f64();
+    let r = resolved;
+    // The halo covers the widest neighbourhood of stages 1-2 with a margin.
+    let halo = 1.25 * r.fit_radius.max(r.rmls_radius);
+
+    // Residual pass.
+    let t = Instant::now();
+    let rdir = dir.join("resid");
+    std::fs::create_dir_all(&rdir).map_err(|e| Error::output(&rdir, e))?;
+    tile_pass(&progress, "residuals", &tiles, &rdir, |t| {
+        let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed)?;
+        let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
+        let which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
+        let res = extract::candidates::residuals(&cloud, &which, r.fit_radius);
+        let mut pairs: Vec<(u64, f32)> = which.iter().zip(&res).map(|(&i, &x)| (cloud.gid[i as usize], x)).collect();
+        pairs.sort_unstable_by_key(|p| p.0);
+        let mut out = Vec::with_capacity(pairs.len() * 12);
+        for (g, x) in pairs {
+            out.extend_from_slice(&g.to_le_bytes());
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+        Ok(out)
+    })?;
+    // tau: the mean residual over all points (summed in tile order, in f64).
+    let mut sum = 0.0f64;
+    let mut count = 0u64;
+    let residuals_of = |t: u32| -> Result<Vec<(u64, f32)>> {
+        let b = read_result(&rdir, t)?;
+        Ok(b.chunks_exact(12).map(|c| (u64::from_le_bytes(c[..8].try_into().unwrap()), f32::from_le_bytes(c[8..].try_into().unwrap()))).collect())
+    };
+    let mut per_tile_sums = vec![];
+    for &t in &tiles {
+        let v = residuals_of(t)?;
+        per_tile_sums.push(v.iter().map(|p| p.1 as f64).sum::<f64>());
+        count += v.len() as u64;
+    }
+    for s in per_tile_sums {
+        sum += s;
+    }
+    let tau = params.tau.unwrap_or(sum / count.max(1) as f64);
+    pass.residuals = t.elapsed().as_secs_f64();
+
+    // Projection pass.
+    let t = Instant::now();
+    let edir = dir.join("edges");
+    std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
+    tile_pass(&progress, "projection", &tiles, &edir, |t| {
+        let res = residuals_of(t)?;
+        let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed)?;
+        let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
+        let cand: Vec<u32> = (0..cloud.len() as u32)
+            .filter(|&i| core[cloud.ids[i as usize] as usize])
+            .filter(|&i| {
+                let g = cloud.gid[i as usize];
+                res.binary_search_by_key(&g, |p| p.0).map_or(false, |k| res[k].1 as f64 > tau)
+            })
+            .collect();
+        let (edges, corners, one) = extract::project_core(&cloud, &cand, &r);
+        Ok(encode_edges(&edges, &corners, cand.len() as u64, one))
+    })?;
+    pass.projection = t.elapsed().as_secs_f64();
+
+    // Curves from the whole edge cloud.
+    let t = Instant::now();
+    let mut edges = vec![];
+    let mut corners = vec![];
+    let mut counts = Counts { points: count, ..Default::default() };
+    for &t in &tiles {
+        let (e, c, n, one) = decode_edges(&read_result(&edir, t)?, &edir.join(format!("{t}.bin")))?;
+        edges.extend(e);
+        corners.extend(c);
+        counts.candidates += n;
+        counts.one_surface += one;
+    }
+    let mut seconds = Timings { candidates: pass.residuals, projection: pass.projection, index: pass.statistics, ..Default::default() };
+    let curves = extract::curves_from_edges(edges, corners, &r, &mut counts, &mut seconds);
+    pass.curves = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    write_outputs(dir, &curves, &crs)?;
+    manifest.finished = true;
+    save(dir, &manifest)?;
+    pass.writing = t.elapsed().as_secs_f64();
     let report = Report {
         version: env!("CARGO_PKG_VERSION").to_string(),
         inputs: files,
-        params: ex.params,
-        tau: ex.tau,
-        counts: ex.counts,
-        seconds: ex.seconds,
-        read_seconds,
-        write_seconds,
+        params: r.clone(),
+        tau,
+        counts,
+        seconds,
+        pass_seconds: pass,
         total_seconds: t0.elapsed().as_secs_f64(),
         peak_rss_bytes: crate::mem::peak_rss(),
         threads: rayon::current_num_threads(),
+        tiles: grid.len(),
+        tile_size: grid.size,
+        halo,
+        resumed,
     };
-    let path = out_dir.join("report.json");
-    let json = serde_json::to_string_pretty(&report).expect("report serialises");
-    std::fs::write(&path, json).map_err(|e| Error::output(&path, e))?;
+    write_atomic(&dir.join("report.json"), serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
     Ok(report)
+}
+
+fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs) -> Result<()> {
+    // Each output goes to a temporary name first, then is renamed into place.
+    let tmp = dir.join("out.tmp");
+    std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
+    write_obj(&tmp.join("curves.obj"), curves)?;
+    write_ply(&tmp.join("curves.ply"), curves)?;
+    write_geojson(&tmp.join("curves.geojson"), curves, crs)?;
+    for f in ["curves.obj", "curves.ply", "curves.geojson"] {
+        let p = tmp.join(f);
+        std::fs::File::open(&p).and_then(|f| f.sync_all()).map_err(|e| Error::output(&p, e))?;
+        std::fs::rename(&p, dir.join(f)).map_err(|e| Error::output(&p, e))?;
+    }
+    let _ = std::fs::remove_dir(&tmp);
+    Ok(())
+}
+
+fn tile_origin(grid: &Grid, t: u32, tp: &TilePoints) -> DVec3 {
+    let _ = (grid, t);
+    tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
+}
+
+/// Loads tile `t`'s core and the halo around it (thinned to share `keep` by id hash); the
+/// flags say which points are core.
+fn load(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64) -> Result<(TilePoints, Vec<bool>)> {
+    let core = grid.core(t);
+    let mut tp = TilePoints::default();
+    let mut is_core = vec![];
+    for n in grid.around(t, halo) {
+        let before = tp.xyz.len();
+        if n == t {
+            store.read(n, &mut tp, |_, g| extract::keep_point(g, keep, seed))?;
+        } else {
+            store.read(n, &mut tp, |p, g| within(&core, halo, p) && extract::keep_point(g, keep, seed))?;
+        }
+        is_core.extend(std::iter::repeat(n == t).take(tp.xyz.len() - before));
+    }
+    Ok((tp, is_core))
+}
+
+fn result_path(dir: &Path, t: u32) -> PathBuf {
+    dir.join(format!("{t}.bin"))
+}
+
+fn read_result(dir: &Path, t: u32) -> Result<Vec<u8>> {
+    let p = result_path(dir, t);
+    let z = std::fs::read(&p).map_err(|e| Error::input(&p, e.to_string()))?;
+    zstd::decode_all(&z[..]).map_err(|e| Error::input(&p, format!("corrupt tile result: {e}")))
+}
+
+/// Runs `f` on every tile without a result in `dir`, in order, storing each result atomically.
+/// The next tile is loaded by `f` itself; tiles are independent, so an interrupted pass resumes
+/// with the first tile that has no result.
+fn tile_pass(progress: &crate::progress::Progress, name: &str, tiles: &[u32], dir: &Path, f: impl Fn(u32) -> Result<Vec<u8>> + Sync) -> Result<()> {
+    let todo: Vec<u32> = tiles.iter().copied().filter(|&t| !result_path(dir, t).exists()).collect();
+    let bar = progress.bar(name, tiles.len() as u64, "tiles");
+    bar.inc((tiles.len() - todo.len()) as u64);
+    // A loader thread runs `f` one tile ahead of the writer: compute (rayon, inside `f`) and
+    // disk writes overlap, and at most two tiles are in memory.
+    let (tx, rx) = crossbeam_channel::bounded::<(u32, Result<Vec<u8>>)>(1);
+    std::thread::scope(|s| -> Result<()> {
+        let f = &f;
+        let todo = &todo;
+        s.spawn(move || {
+            for &t in todo {
+                if STOP.load(Ordering::SeqCst) {
+                    break;
+                }
+                if tx.send((t, f(t))).is_err() {
+                    break;
+                }
+            }
+        });
+        for (t, out) in rx.iter() {
+            let out = out?;
+            let z = zstd::encode_all(&out[..], 1).map_err(|e| Error::output(dir, e))?;
+            write_atomic(&result_path(dir, t), &z)?;
+            bar.inc(1);
+            check_stop()?;
+        }
+        Ok(())
+    })?;
+    check_stop()?;
+    bar.finish();
+    Ok(())
+}
+
+fn encode_edges(edges: &[WorldEdge], corners: &[WorldCorner], candidates: u64, one: u64) -> Vec<u8> {
+    let mut out = Vec::with_capacity(32 + edges.len() * 48 + corners.len() * 32);
+    for v in [edges.len() as u64, corners.len() as u64, candidates, one] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    for e in edges {
+        for x in e.p.to_array() {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+        for n in e.n {
+            for x in n.to_array() {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+    }
+    for c in corners {
+        for x in c.p.to_array() {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+        out.extend_from_slice(&c.w.to_le_bytes());
+    }
+    out
+}
+
+type Decoded = (Vec<WorldEdge>, Vec<WorldCorner>, u64, u64);
+
+fn decode_edges(b: &[u8], path: &Path) -> Result<Decoded> {
+    let bad = || Error::input(path, "corrupt tile result");
+    if b.len() < 32 {
+        return Err(bad());
+    }
+    let u = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().unwrap());
+    let (ne, nc) = (u(0) as usize, u(8) as usize);
+    if b.len() != 32 + ne * 48 + nc * 32 {
+        return Err(bad());
+    }
+    let f = |o: usize| f64::from_le_bytes(b[o..o + 8].try_into().unwrap());
+    let g = |o: usize| f32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+    let mut edges = Vec::with_capacity(ne);
+    for i in 0..ne {
+        let o = 32 + i * 48;
+        edges.push(WorldEdge {
+            p: DVec3::new(f(o), f(o + 8), f(o + 16)),
+            n: [Vec3::new(g(o + 24), g(o + 28), g(o + 32)), Vec3::new(g(o + 36), g(o + 40), g(o + 44))],
+        });
+    }
+    let mut corners = Vec::with_capacity(nc);
+    for i in 0..nc {
+        let o = 32 + ne * 48 + i * 32;
+        corners.push(WorldCorner { p: DVec3::new(f(o), f(o + 8), f(o + 16)), w: f(o + 24) });
+    }
+    Ok((edges, corners, u(16), u(24)))
+}
+
+/// What `crease status` reports.
+#[derive(Clone, Debug, Serialize)]
+pub struct Status {
+    /// Run directory.
+    pub dir: PathBuf,
+    /// Inputs.
+    pub inputs: Vec<PathBuf>,
+    /// Tiles with points.
+    pub tiles: usize,
+    /// Bucketing done.
+    pub bucketed: bool,
+    /// Tiles done per pass: statistics, residuals, projection.
+    pub passes: Vec<(String, usize)>,
+    /// Outputs written.
+    pub finished: bool,
+    /// One-line summary.
+    pub summary: String,
+}
+
+/// Reads what a run directory has done.
+pub fn status(dir: &Path) -> Result<Status> {
+    let m = read_manifest(dir)?.ok_or_else(|| Error::input(dir, "not a crease run directory (no manifest.json)"))?;
+    let tiles: Vec<u32> = (0..m.tile_points.len() as u32).filter(|&t| m.tile_points[t as usize] > 0).collect();
+    let done = |sub: &str| tiles.iter().filter(|&&t| result_path(&dir.join(sub), t).exists()).count();
+    let passes: Vec<(String, usize)> = [("statistics", "stats"), ("residuals", "resid"), ("projection", "edges")].iter().map(|(n, d)| (n.to_string(), done(d))).collect();
+    let summary = if m.finished {
+        "finished".to_string()
+    } else if !m.bucketed {
+        "bucketing not finished (it restarts from the beginning)".to_string()
+    } else {
+        match passes.iter().find(|p| p.1 < tiles.len()) {
+            Some((name, n)) => format!("in {name}: {n} of {} tiles done", tiles.len()),
+            None => "curves and outputs left to do".to_string(),
+        }
+    };
+    Ok(Status { dir: dir.to_path_buf(), inputs: m.job.inputs.iter().map(|i| i.path.clone()).collect(), tiles: tiles.len(), bucketed: m.bucketed, passes, finished: m.finished, summary })
+}
+
+/// Formats a status for humans.
+pub fn render_status(s: &Status) -> String {
+    let mut out = format!("{}: {}\n  inputs     {}\n  tiles      {}\n  bucketed   {}\n", s.dir.display(), s.summary, s.inputs.len(), s.tiles, if s.bucketed { "yes" } else { "no" });
+    for (name, n) in &s.passes {
+        out += &format!("  {name:<10} {n}/{}\n", s.tiles);
+    }
+    out += &format!("  outputs    {}\n", if s.finished { "written" } else { "not yet" });
+    out
 }

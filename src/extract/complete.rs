@@ -159,7 +159,7 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams) {
                             }
                         }
                         let d = q.distance(x);
-                        if d > reach || d == 0.0 || !in_cone(x, t, q, cos, 0.0) {
+                        if d > reach || d == 0.0 || !in_cone(x, t, q, cos, p.step) {
                             continue;
                         }
                         if best.as_ref().map_or(true, |b| d < b.0) {
@@ -209,6 +209,21 @@ fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: 
         curves[ci].push_end(e, c, true);
         curves[cj].push_end(te, c, true);
         return true;
+    }
+    // An interior vertex near a free end of a curve running the same way is that curve's
+    // overlapping end, not a junction: treat it as the end.
+    if !target.closed {
+        let dir = (target.v[(vi + 1).min(last)] - target.v[vi.saturating_sub(1)]).normalize_or_zero();
+        let parallel = dir.dot(t).abs() > 30f64.to_radians().cos();
+        let near_end = target.v[vi].distance(target.v[0]).min(target.v[vi].distance(target.v[last])) <= 2.0 * reach;
+        if parallel && near_end {
+            let te = if target.v[vi].distance(target.v[0]) <= target.v[vi].distance(target.v[last]) { 0 } else { 1 };
+            let end_index = if te == 0 { 0 } else { last };
+            if target.corner[end_index] || (ci == cj && te == e) {
+                return false;
+            }
+            return act(curves, ci, e, cj, end_index, cos, reach);
+        }
     }
     // Interior vertex: split there and make it a corner.
     let corner = target.v[vi];

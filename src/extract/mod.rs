@@ -23,7 +23,7 @@ use std::time::Instant;
 
 /// User parameters; every length is in model units and defaults to a multiple of the point
 /// spacing kappa (the median nearest-neighbour distance).
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct Params {
     /// Point spacing kappa (default: estimated).
     pub kappa: Option<f64>,
@@ -307,6 +307,10 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
     let t = Instant::now();
     let grown = grow::grow(&smoothed, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg });
     counts.grown = grown.len() as u64;
+    if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
+        let pl: Vec<Polyline> = grown.iter().enumerate().map(|(i, g)| Polyline::from_points(i as u32, g.vertices.iter().map(|p| *p + origin))).collect();
+        let _ = crate::curves::write_obj(&std::path::Path::new(&dir).join("grown.obj"), &pl);
+    }
     seconds.growing = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2 };

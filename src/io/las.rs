@@ -26,12 +26,13 @@ struct Layout {
 impl Layout {
     /// Decodes `n` records from `bytes` into `out`, keeping points the filter accepts.
     #[inline]
-    fn decode(&self, bytes: &[u8], out: &mut PointChunk, table: &[bool; 256], keep_withheld: bool) {
+    fn decode(&self, bytes: &[u8], first: u64, out: &mut PointChunk, table: &[bool; 256], keep_withheld: bool) {
         let rl = self.record_len;
         let n = bytes.len() / rl;
         out.xyz.reserve(n);
         out.class.reserve(n);
-        for rec in bytes.chunks_exact(rl) {
+        out.index.reserve(n);
+        for (k, rec) in bytes.chunks_exact(rl).enumerate() {
             let (class, withheld) = if self.extended {
                 (rec[16], rec[15] & 0x04 != 0)
             } else {
@@ -46,6 +47,7 @@ impl Layout {
             let p = DVec3::new(x as f64, y as f64, z as f64) * self.scale + self.offset;
             out.xyz.push(p);
             out.class.push(class);
+            out.index.push(first + k as u64);
         }
     }
 }
@@ -247,7 +249,7 @@ impl LasReader {
         match &mut self.points {
             Points::Mapped { map, offset } => {
                 let start = *offset + self.next as usize * rl;
-                self.layout.decode(&map[start..start + n * rl], out, table, keep_withheld);
+                self.layout.decode(&map[start..start + n * rl], self.next, out, table, keep_withheld);
                 release(map, start, start + n * rl);
             }
             Points::Compressed { reader, buf } => {
@@ -259,7 +261,7 @@ impl LasReader {
                     ));
                 }
                 let layout = Layout { record_len: buf.record_len(), ..self.layout };
-                layout.decode(buf.raw_bytes(), out, table, keep_withheld);
+                layout.decode(buf.raw_bytes(), self.next, out, table, keep_withheld);
             }
         }
         self.next += n as u64;

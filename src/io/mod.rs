@@ -174,6 +174,7 @@ impl PointReader {
         while self.read_chunk(DEFAULT_CHUNK, &mut chunk)? > 0 {
             all.xyz.extend_from_slice(&chunk.xyz);
             all.class.extend_from_slice(&chunk.class);
+            all.index.extend_from_slice(&chunk.index);
         }
         Ok(all)
     }

@@ -257,6 +257,7 @@ impl PlyReader {
             if keep {
                 out.xyz.push(p);
                 out.class.push(0);
+                out.index.push(idx);
             }
         }
         self.next += n as u64;

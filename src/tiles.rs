@@ -1,0 +1,247 @@
+//! Tiles: the grid over a cloud's bounds, and the on-disk tile store.
+//!
+//! Each point is written once, to the tile whose core holds it, as zstd-compressed chunks of
+//! world coordinates and global point ids. A tile's halo is assembled when the tile is
+//! processed, from the neighbouring tiles' stores, so the halo width can be chosen after the
+//! cloud's spacing and noise are known.
+
+use crate::cloud::{Bounds, PointChunk};
+use crate::error::{Error, Result};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+/// A regular grid of cubic (3D) or square-column (2D, one layer in z) tiles.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Grid {
+    /// Minimum corner.
+    pub origin: [f64; 3],
+    /// Tile edge length (x and y; z too unless the grid is 2D).
+    pub size: f64,
+    /// Tiles along x, y, z.
+    pub dims: [u32; 3],
+    /// Height of the single layer of a 2D grid (0 for 3D grids).
+    pub layer: f64,
+}
+
+impl Grid {
+    /// A grid over `b` with tiles of edge `size`; 2D (one layer) when the cloud is flat
+    /// compared with its footprint, as airborne scans are.
+    pub fn new(b: &Bounds, size: f64) -> Grid {
+        let ext = DVec3::from(b.max) - DVec3::from(b.min);
+        let flat = ext.z < 0.25 * ext.x.max(ext.y);
+        let n = |e: f64| ((e / size).floor() as u32 + 1).max(1);
+        let dims = [n(ext.x), n(ext.y), if flat { 1 } else { n(ext.z) }];
+        Grid { origin: b.min, size, dims, layer: if flat { ext.z.max(1e-9) * 1.0001 + size } else { 0.0 } }
+    }
+
+    /// Number of tiles.
+    pub fn len(&self) -> usize {
+        (self.dims[0] * self.dims[1] * self.dims[2]) as usize
+    }
+
+    /// True if the grid has no tile.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn cell(&self, v: f64, axis: usize) -> u32 {
+        let c = ((v - self.origin[axis]) / self.size).floor();
+        (c.max(0.0) as u32).min(self.dims[axis] - 1)
+    }
+
+    /// The tile whose core holds `p`.
+    pub fn tile_of(&self, p: DVec3) -> u32 {
+        let (i, j) = (self.cell(p.x, 0), self.cell(p.y, 1));
+        let k = if self.dims[2] == 1 { 0 } else { self.cell(p.z, 2) };
+        (k * self.dims[1] + j) * self.dims[0] + i
+    }
+
+    fn coords(&self, t: u32) -> [u32; 3] {
+        [t % self.dims[0], (t / self.dims[0]) % self.dims[1], t / (self.dims[0] * self.dims[1])]
+    }
+
+    /// The core box of tile `t` (tiles on the grid's edge extend to infinity outwards, so
+    /// every point has exactly one owner).
+    pub fn core(&self, t: u32) -> Bounds {
+        let c = self.coords(t);
+        let mut b = Bounds { min: [0.0; 3], max: [0.0; 3] };
+        for a in 0..3 {
+            let lo = self.origin[a] + c[a] as f64 * self.size;
+            b.min[a] = if c[a] == 0 { f64::NEG_INFINITY } else { lo };
+            b.max[a] = if c[a] + 1 == self.dims[a] { f64::INFINITY } else { lo + self.size };
+        }
+        b
+    }
+
+    /// Tiles whose cores come within `halo` of tile `t`'s core (including `t`).
+    pub fn around(&self, t: u32, halo: f64) -> Vec<u32> {
+        let c = self.coords(t);
+        let r = (halo / self.size).ceil() as i64;
+        let mut out = vec![];
+        for k in -r..=r {
+            for j in -r..=r {
+                for i in -r..=r {
+                    let n = [c[0] as i64 + i, c[1] as i64 + j, c[2] as i64 + k];
+                    if (0..3).all(|a| n[a] >= 0 && n[a] < self.dims[a] as i64) {
+                        out.push(((n[2] as u32) * self.dims[1] + n[1] as u32) * self.dims[0] + n[0] as u32);
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// True if `p` lies in `b` grown by `halo`.
+pub fn within(b: &Bounds, halo: f64, p: DVec3) -> bool {
+    (0..3).all(|a| p[a] >= b.min[a] - halo && p[a] < b.max[a] + halo)
+}
+
+/// Points of a tile: world positions and global ids.
+#[derive(Clone, Debug, Default)]
+pub struct TilePoints {
+    /// Positions.
+    pub xyz: Vec<DVec3>,
+    /// Global ids.
+    pub gid: Vec<u64>,
+}
+
+/// The directory of tile stores.
+#[derive(Clone, Debug)]
+pub struct Store {
+    dir: PathBuf,
+}
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |e| Error::output(path, e)
+}
+
+impl Store {
+    /// A store in `dir` (created if needed).
+    pub fn new(dir: &Path) -> Result<Store> {
+        std::fs::create_dir_all(dir).map_err(io(dir))?;
+        Ok(Store { dir: dir.to_path_buf() })
+    }
+
+    fn path(&self, t: u32) -> PathBuf {
+        self.dir.join(format!("{t}.pts"))
+    }
+
+    /// Appends points to tile `t`'s file as one compressed chunk.
+    pub fn append(&self, t: u32, pts: &TilePoints) -> Result<()> {
+        let n = pts.xyz.len();
+        let mut raw = Vec::with_capacity(n * 32);
+        for a in 0..3 {
+            for p in &pts.xyz {
+                raw.extend_from_slice(&p[a].to_le_bytes());
+            }
+        }
+        for g in &pts.gid {
+            raw.extend_from_slice(&g.to_le_bytes());
+        }
+        let z = zstd::bulk::compress(&raw, 1).map_err(io(&self.dir))?;
+        let path = self.path(t);
+        let mut f = std::fs::OpenOptions::new().create(true).append(true).open(&path).map_err(io(&path))?;
+        f.write_all(&(n as u32).to_le_bytes()).map_err(io(&path))?;
+        f.write_all(&(z.len() as u32).to_le_bytes()).map_err(io(&path))?;
+        f.write_all(&z).map_err(io(&path))?;
+        Ok(())
+    }
+
+    /// Makes every tile file durable.
+    pub fn sync(&self) -> Result<()> {
+        for e in std::fs::read_dir(&self.dir).map_err(io(&self.dir))?.flatten() {
+            std::fs::File::open(e.path()).and_then(|f| f.sync_all()).map_err(io(&e.path()))?;
+        }
+        Ok(())
+    }
+
+    /// Streams tile `t`'s points in chunks, keeping those `keep` accepts.
+    pub fn read(&self, t: u32, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<()> {
+        let path = self.path(t);
+        let mut f = match std::fs::File::open(&path) {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(Error::input(&path, e.to_string())),
+        };
+        let corrupt = || Error::input(&path, "corrupt tile store (remove the run directory or use --force)");
+        let mut head = [0u8; 8];
+        let mut z = Vec::new();
+        loop {
+            match f.read_exact(&mut head) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,
+                Err(e) => return Err(Error::input(&path, e.to_string())),
+            }
+            let n = u32::from_le_bytes(head[..4].try_into().unwrap()) as usize;
+            let zl = u32::from_le_bytes(head[4..].try_into().unwrap()) as usize;
+            z.resize(zl, 0);
+            f.read_exact(&mut z).map_err(|_| corrupt())?;
+            let raw = zstd::bulk::decompress(&z, n * 32).map_err(|_| corrupt())?;
+            if raw.len() != n * 32 {
+                return Err(corrupt());
+            }
+            let f64_at = |o: usize| f64::from_le_bytes(raw[o..o + 8].try_into().unwrap());
+            for i in 0..n {
+                let p = DVec3::new(f64_at(8 * i), f64_at(8 * (n + i)), f64_at(8 * (2 * n + i)));
+                let g = u64::from_le_bytes(raw[8 * (3 * n + i)..8 * (3 * n + i) + 8].try_into().unwrap());
+                if keep(p, g) {
+                    out.xyz.push(p);
+                    out.gid.push(g);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Buffers points per tile and appends them to the store when the buffers grow past a budget.
+pub struct Bucketer<'a> {
+    grid: &'a Grid,
+    store: &'a Store,
+    buffers: HashMap<u32, TilePoints>,
+    buffered: usize,
+    budget: usize,
+    /// Points bucketed per tile.
+    pub counts: Vec<u64>,
+}
+
+impl<'a> Bucketer<'a> {
+    /// A bucketer holding at most `budget` points in memory.
+    pub fn new(grid: &'a Grid, store: &'a Store, budget: usize) -> Self {
+        Bucketer { grid, store, buffers: HashMap::new(), buffered: 0, budget: budget.max(1024), counts: vec![0; grid.len()] }
+    }
+
+    /// Adds a chunk of points; `gid0` is the global id of the chunk's first point.
+    pub fn add(&mut self, chunk: &PointChunk, gids: &[u64]) -> Result<()> {
+        for (p, &g) in chunk.xyz.iter().zip(gids) {
+            let t = self.grid.tile_of(*p);
+            let b = self.buffers.entry(t).or_default();
+            b.xyz.push(*p);
+            b.gid.push(g);
+            self.counts[t as usize] += 1;
+        }
+        self.buffered += chunk.len();
+        if self.buffered >= self.budget {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Writes every buffer out.
+    pub fn flush(&mut self) -> Result<()> {
+        let mut tiles: Vec<u32> = self.buffers.keys().copied().collect();
+        tiles.sort_unstable();
+        for t in tiles {
+            let b = self.buffers.remove(&t).unwrap();
+            if !b.xyz.is_empty() {
+                self.store.append(t, &b)?;
+            }
+        }
+        self.buffered = 0;
+        Ok(())
+    }
+}
