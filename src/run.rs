@@ -67,6 +67,8 @@ pub struct Manifest {
     pub grid: Grid,
     /// Points the headers declare.
     pub declared_points: u64,
+    /// Diagonal of the inputs' union bounds.
+    pub diag: f64,
     /// Bucketing finished.
     pub bucketed: bool,
     /// Points per tile after filtering.
@@ -317,7 +319,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
                 return Err(Error::input(&files[0], "no points"));
             }
             let size = opts.tile_size.unwrap_or_else(|| tile_size_for(&b, declared, opts.memory));
-            let m = Manifest { job: job.clone(), grid: Grid::new(&b, size), declared_points: declared, bucketed: false, tile_points: vec![], resolved: None, finished: false };
+            let m = Manifest { job: job.clone(), grid: Grid::new(&b, size), declared_points: declared, diag: b.diagonal(), bucketed: false, tile_points: vec![], resolved: None, finished: false };
             save(dir, &m)?;
             m
         }
@@ -364,6 +366,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         return Err(Error::input(&files[0], format!("only {total} points after filtering: nothing to extract")));
     }
     let grid = manifest.grid.clone();
+    let kq = extract::key_quantum(manifest.diag);
     let tiles: Vec<u32> = (0..grid.len() as u32).filter(|&t| manifest.tile_points[t as usize] > 0).collect();
     let seed = params.seed.unwrap_or(1);
 
@@ -382,12 +385,12 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             let sdir = dir.join("stats");
             std::fs::create_dir_all(&sdir).map_err(|e| Error::output(&sdir, e))?;
             tile_pass(&progress, "statistics", &tiles, &sdir, |t| {
-                let (tp, core) = load(&store, &grid, t, halo0, 1.0, seed)?;
+                let (tp, core) = load(&store, &grid, t, halo0, 1.0, seed, kq)?;
                 let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
                 let mut buf = Vec::new();
                 let mut out: Vec<u8> = Vec::new();
                 for i in 0..cloud.len() {
-                    if core[cloud.ids[i] as usize] && extract::stat_sample(cloud.gid[i], total, seed) {
+                    if core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed) {
                         if let Some(s) = extract::point_stats(&cloud, i, &mut buf) {
                             for v in [s.0, s.1, s.2] {
                                 out.extend_from_slice(&v.to_le_bytes());
@@ -424,7 +427,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let rdir = dir.join("resid");
     std::fs::create_dir_all(&rdir).map_err(|e| Error::output(&rdir, e))?;
     tile_pass(&progress, "residuals", &tiles, &rdir, |t| {
-        let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed)?;
+        let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed, kq)?;
         let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
         let which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
         let res = extract::candidates::residuals(&cloud, &which, r.fit_radius);
@@ -462,7 +465,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
     tile_pass(&progress, "projection", &tiles, &edir, |t| {
         let res = residuals_of(t)?;
-        let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed)?;
+        let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed, kq)?;
         let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
         let cand: Vec<u32> = (0..cloud.len() as u32)
             .filter(|&i| core[cloud.ids[i as usize] as usize])
@@ -540,16 +543,16 @@ fn tile_origin(grid: &Grid, t: u32, tp: &TilePoints) -> DVec3 {
 
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by id hash); the
 /// flags say which points are core.
-fn load(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64) -> Result<(TilePoints, Vec<bool>)> {
+fn load(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64, kq: f64) -> Result<(TilePoints, Vec<bool>)> {
     let core = grid.core(t);
     let mut tp = TilePoints::default();
     let mut is_core = vec![];
     for n in grid.around(t, halo) {
         let before = tp.xyz.len();
         if n == t {
-            store.read(n, &mut tp, |_, g| extract::keep_point(g, keep, seed))?;
+            store.read(n, &mut tp, |p, _| extract::keep_point(extract::position_key(p, kq), keep, seed))?;
         } else {
-            store.read(n, &mut tp, |p, g| within(&core, halo, p) && extract::keep_point(g, keep, seed))?;
+            store.read(n, &mut tp, |p, _| within(&core, halo, p) && extract::keep_point(extract::position_key(p, kq), keep, seed))?;
         }
         is_core.extend(std::iter::repeat(n == t).take(tp.xyz.len() - before));
     }
@@ -576,9 +579,14 @@ fn tile_pass(progress: &crate::progress::Progress, name: &str, tiles: &[u32], di
     // A loader thread runs `f` one tile ahead of the writer: compute (rayon, inside `f`) and
     // disk writes overlap, and at most two tiles are in memory.
     let (tx, rx) = crossbeam_channel::bounded::<(u32, Result<Vec<u8>>)>(1);
-    std::thread::scope(|s| -> Result<()> {
-        let f = &f;
-        let todo = &todo;
+    let f = &f;
+    let todo = &todo;
+    let bar_ref = &bar;
+    std::thread::scope(move |s| -> Result<()> {
+        let bar = bar_ref;
+        // Owning the receiver here drops it on any early return, which unblocks the loader
+        // (its send fails) before the scope joins it.
+        let rx = rx;
         s.spawn(move || {
             for &t in todo {
                 if STOP.load(Ordering::SeqCst) {

@@ -1,7 +1,7 @@
 //! The point set a stage works on: f32 coordinates local to an f64 origin, with a k-d tree.
 
 use crate::spatial::Index;
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 
 /// Points of one tile (core and halo) in local coordinates, indexed for neighbour queries.
 /// Points are stored in Morton (Z-curve) order so that consecutive points are spatial
@@ -9,8 +9,11 @@ use glam::{DVec3, Vec3};
 pub struct Cloud {
     /// World position of the local origin.
     pub origin: DVec3,
-    /// Local coordinates, in Morton order.
+    /// Local coordinates in f32 (for the tree), in Morton order.
     pub points: Vec<[f32; 3]>,
+    /// The same in f64: fits use these, so results do not depend on where the origin is
+    /// beyond the last bits (f32 rounding would depend on it).
+    pub pos: Vec<DVec3>,
     /// For each stored point, its index in the input slice.
     pub ids: Vec<u32>,
     /// For each stored point, its global identity (stable across tilings).
@@ -50,10 +53,11 @@ impl Cloud {
         let mut order: Vec<(u64, u32)> = world.iter().enumerate().map(|(i, p)| (code(*p), i as u32)).collect();
         order.sort_unstable();
         let ids: Vec<u32> = order.iter().map(|o| o.1).collect();
-        let points: Vec<[f32; 3]> = ids.iter().map(|&i| (world[i as usize] - origin).as_vec3().to_array()).collect();
+        let pos: Vec<DVec3> = ids.iter().map(|&i| world[i as usize] - origin).collect();
+        let points: Vec<[f32; 3]> = pos.iter().map(|p| p.as_vec3().to_array()).collect();
         let gid: Vec<u64> = ids.iter().map(|&i| gids[i as usize]).collect();
         let index = Index::new(&points);
-        Cloud { origin, points, ids, gid, index }
+        Cloud { origin, points, pos, ids, gid, index }
     }
 
     /// Number of points.
@@ -69,7 +73,7 @@ impl Cloud {
     /// Local position of point `i` in f64.
     #[inline]
     pub fn at(&self, i: usize) -> DVec3 {
-        Vec3::from(self.points[i]).as_dvec3()
+        self.pos[i]
     }
 
     /// Indices (and squared distances) of the points within `r` of local position `q`, or the
@@ -77,14 +81,29 @@ impl Cloud {
     /// most about `max` of them, an even subsample of the ball when there are more.
     pub fn neighbours(&self, q: DVec3, r: f64, min: usize, max: usize, out: &mut Vec<(u32, f32)>) {
         out.clear();
-        self.index.within(&q.as_vec3().to_array(), r as f32, out);
+        // Query the f32 tree a little wide, then decide membership in f64, so the ball holds
+        // the same points wherever the tile's origin lies.
+        self.index.within(&q.as_vec3().to_array(), (r * (1.0 + 1e-5)) as f32 + f32::EPSILON, out);
+        let r2 = r * r;
+        out.retain_mut(|a| {
+            let d2 = self.pos[a.0 as usize].distance_squared(q);
+            a.1 = d2 as f32;
+            d2 <= r2
+        });
         if out.len() < min {
             out.clear();
             self.index.nearest_n(&q.as_vec3().to_array(), min, out);
+            for a in out.iter_mut() {
+                a.1 = self.pos[a.0 as usize].distance_squared(q) as f32;
+            }
         }
-        // Neighbours in global-id order: every fit, subsample and random choice over them is
-        // then the same whatever the tiling or thread count.
-        out.sort_unstable_by_key(|a| self.gid[a.0 as usize]);
+        // Neighbours in coordinate order: every fit, subsample and choice over them is then
+        // the same whatever the tiling, the thread count, or how the points were split into
+        // files.
+        out.sort_unstable_by(|a, b| {
+            let (p, q) = (self.pos[a.0 as usize], self.pos[b.0 as usize]);
+            p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(self.gid[a.0 as usize].cmp(&self.gid[b.0 as usize]))
+        });
         if out.len() > max {
             let stride = out.len().div_ceil(max);
             let mut k = 0;

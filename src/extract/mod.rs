@@ -174,9 +174,25 @@ pub struct Extraction {
 /// Share of points whose neighbourhoods are measured for kappa and the noise (by id hash).
 pub const STAT_SAMPLES: f64 = 20_000.0;
 
-/// True if point `gid` is one of the statistics sample in a cloud of `total` points.
-pub fn stat_sample(gid: u64, total: u64, seed: u64) -> bool {
-    keep_point(gid ^ 0x5A5A_5A5A, STAT_SAMPLES / total.max(1) as f64, seed)
+/// The quantum of [`position_key`] for a cloud with bounding-box diagonal `diag`: a power of
+/// two near a billionth of it, so that clouds whose bounds differ in the last bits agree.
+pub fn key_quantum(diag: f64) -> f64 {
+    2f64.powi((diag.max(1e-300) * 1e-9).log2().floor() as i32)
+}
+
+/// A point's identity from its position (rounded to `q`): the same point gets the same key
+/// whichever file, tile or order it comes in, so sampling and thinning by key are independent
+/// of how a cloud is split.
+pub fn position_key(p: DVec3, q: f64) -> u64 {
+    let w = (p / q).round();
+    let bytes: Vec<u8> = w.to_array().iter().flat_map(|v| (*v as i64).to_le_bytes()).collect();
+    crate::run::fnv1a(&bytes)
+}
+
+/// True if the point with key `key` is one of the statistics sample in a cloud of `total`
+/// points.
+pub fn stat_sample(key: u64, total: u64, seed: u64) -> bool {
+    keep_point(key ^ 0x5A5A_5A5A, STAT_SAMPLES / total.max(1) as f64, seed)
 }
 
 /// Neighbourhood statistics of one sampled point: its spacing (from the 16th neighbour, see
@@ -189,13 +205,15 @@ pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option
     if buf.len() < K + 1 {
         return None;
     }
-    let rk = (buf.iter().map(|b| b.1).fold(0.0f32, f32::max) as f64).sqrt();
+    // Distances in f64 from the f64 positions: the f32 tree's own distances depend on the
+    // tile's origin in their last bits.
+    let q = cloud.at(i);
+    let rk = buf.iter().map(|b| cloud.at(b.0 as usize).distance_squared(q)).fold(0.0f64, f64::max).sqrt();
     let kappa = rk * (2f64.ln() / K as f64).sqrt();
-    buf.clear();
-    cloud.index.within(&cloud.points[i], (16.0 * kappa) as f32, buf);
+    cloud.neighbours(q, 16.0 * kappa, 0, usize::MAX, buf);
     // Points per unit area around this point, from the count in the 16-kappa ball.
     let density = buf.len() as f64 / (std::f64::consts::PI * (16.0 * kappa).powi(2));
-    cloud.neighbours(cloud.at(i), 16.0 * kappa, 0, 128, buf);
+    cloud.neighbours(q, 16.0 * kappa, 0, 128, buf);
     if buf.len() < 10 {
         return Some((kappa, 0.0, density));
     }
@@ -267,7 +285,10 @@ pub struct WorldCorner {
 /// residual threshold `tau` (computed by the caller). Returns edge and corner points in world
 /// coordinates, and the number of candidates and of candidates lying on one surface only.
 pub fn project_core(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> (Vec<WorldEdge>, Vec<WorldCorner>, u64) {
-    let ids: Vec<u64> = candidates.iter().map(|&i| cloud.gid[i as usize]).collect();
+    // Each candidate's random stream is keyed by its position (on a grid far finer than the
+    // spacing), not by its id, so the same point gets the same stream in any file layout.
+    let q = r.kappa / 4096.0;
+    let ids: Vec<u64> = candidates.iter().map(|&i| position_key(cloud.at(i as usize) + cloud.origin, q)).collect();
     let pp = project::ProjectParams { radius: r.rmls_radius, min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed };
     let projected = project::project(cloud, candidates, &ids, &pp);
     let one = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
@@ -280,9 +301,25 @@ pub fn project_core(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> (Vec<Wor
 /// Stages 3 to 5 on the whole edge cloud: corner grouping, smoothing, growing, completion.
 /// Edge points are sorted first so the result does not depend on the order they arrive in.
 pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner>, r: &Resolved, counts: &mut Counts, seconds: &mut Timings) -> Vec<Polyline> {
+    // Snap to a grid far finer than the spacing: positions computed in differently placed
+    // tiles differ in their last bits, and the curve stages are discrete (seed order, cone
+    // tests); snapping makes their input, and so the curves, the same for any tiling.
+    let q = r.kappa / 4096.0;
+    // (+ 0.0 turns a negative zero, whose sign is rounding noise, into zero.)
+    let snap = |p: DVec3| (p / q).round() * q + DVec3::ZERO;
+    let snap_n = |n: glam::Vec3| (n * 1e6).round() / 1e6 + glam::Vec3::ZERO;
+    for e in edges.iter_mut() {
+        e.p = snap(e.p);
+        e.n = e.n.map(snap_n);
+    }
+    for c in corners.iter_mut() {
+        c.p = snap(c.p);
+        c.w = (c.w * q).round() / q;
+    }
     let key = |p: DVec3| p.to_array().map(f64::to_bits);
-    edges.sort_by(|a, b| key(a.p).cmp(&key(b.p)));
-    corners.sort_by(|a, b| key(a.p).cmp(&key(b.p)));
+    let nkey = |n: &[glam::Vec3; 2]| [n[0].to_array(), n[1].to_array()].map(|v| v.map(f32::to_bits));
+    edges.sort_by(|a, b| key(a.p).cmp(&key(b.p)).then(nkey(&a.n).cmp(&nkey(&b.n))));
+    corners.sort_by(|a, b| key(a.p).cmp(&key(b.p)).then(a.w.total_cmp(&b.w)));
     counts.edge_points = edges.len() as u64;
     counts.corner_points = corners.len() as u64;
     let origin = edges.iter().map(|e| e.p).reduce(DVec3::min).unwrap_or(DVec3::ZERO);
@@ -330,9 +367,10 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     let gids: Vec<u64> = (0..points.len() as u64).collect();
     let full = Cloud::new(points);
     let seed = params.seed.unwrap_or(1);
+    let kq = key_quantum(crate::cloud::Bounds::of(points.iter().copied()).diagonal());
     let mut buf = Vec::new();
     let stats: Vec<(f64, f64, f64)> = (0..full.len())
-        .filter(|&i| stat_sample(full.gid[i], points.len() as u64, seed))
+        .filter(|&i| stat_sample(position_key(full.at(i) + full.origin, kq), points.len() as u64, seed))
         .filter_map(|i| point_stats(&full, i, &mut buf))
         .collect();
     let mut r = resolve(params, &stats);
@@ -342,7 +380,7 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     // Noisy clouds need neighbourhoods wider than the noise; thin them (by a hash of each
     // point's identity, so the choice is the same in any tile) to keep fits affordable.
     let cloud = if r.keep < 1.0 {
-        let keep: Vec<usize> = (0..points.len()).filter(|&i| keep_point(gids[i], r.keep, r.seed)).collect();
+        let keep: Vec<usize> = (0..points.len()).filter(|&i| keep_point(position_key(points[i], kq), r.keep, r.seed)).collect();
         let kept: Vec<DVec3> = keep.iter().map(|&i| points[i]).collect();
         let kept_ids: Vec<u64> = keep.iter().map(|&i| gids[i]).collect();
         Cloud::with_origin(&kept, &kept_ids, full.origin)

@@ -69,6 +69,10 @@ const SEEDS: usize = 16;
 /// Smallest seed patch; patches hold a tenth of the neighbourhood so that their planes are
 /// meaningful even when noise is larger than the point spacing.
 const SEED_PATCH: usize = 6;
+/// Surfaces whose planes (unoriented) are closer than this share of the minimum crease angle
+/// are one surface; below 1 so that acute wedges, whose planes are as close as those of a
+/// gentle fold, are still split (`crease_angle` then tells them apart).
+const MIN_SPLIT_FRACTION: f64 = 0.8;
 /// Rounds of exclusive re-assignment and re-fitting.
 const REFINE_ROUNDS: usize = 5;
 /// Most surfaces looked for.
@@ -118,9 +122,12 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Ve
     let mut surfaces: Vec<Surface> = Vec::new();
     while s.remaining.len() >= min_count && surfaces.len() < MAX_SURFACES {
         let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count) else { break };
-        // A "new" surface parallel to one already found is the same surface's leftovers.
+        // A "new" surface (nearly) parallel to one already found is the same surface's
+        // leftovers. (How sharp a crease is can only be told once its edge is known: see
+        // `crease_angle`.)
         let nn = surf.quad.frame.n;
-        let distinct = surfaces.iter().all(|o| o.quad.frame.n.dot(nn).abs() < p.min_angle_deg.to_radians().cos());
+        let split = (MIN_SPLIT_FRACTION * p.min_angle_deg).to_radians().cos();
+        let distinct = surfaces.iter().all(|o| o.quad.frame.n.dot(nn).abs() < split);
         if distinct {
             surfaces.push(surf);
         }
@@ -139,6 +146,9 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Ve
     if e.distance(x) > reach {
         return out;
     }
+    if crease_angle(e, &surfaces[0].quad, &surfaces[1].quad) < p.min_angle_deg {
+        return out;
+    }
     out.edge = Some(EdgePoint { p: e, n: [surfaces[0].quad.normal(e), surfaces[1].quad.normal(e)] });
     if surfaces.len() >= 3 {
         if let Some(c) = project_to_corner(x, [&surfaces[0].quad, &surfaces[1].quad, &surfaces[2].quad], tol) {
@@ -148,6 +158,23 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Ve
         }
     }
     out
+}
+
+/// How far from flat the crease at edge point `e` is, in degrees: 180 minus the dihedral
+/// angle between the two half-surfaces, each represented by the direction from the edge to its
+/// points' centroid (the fit frames' origins). An acute wedge and a nearly flat fold have
+/// planes at the same unoriented angle; the half-surface directions tell them apart.
+fn crease_angle(e: DVec3, a: &Quadric, b: &Quadric) -> f64 {
+    let t = a.normal(e).cross(b.normal(e)).normalize_or_zero();
+    let side = |c: DVec3| {
+        let d = c - e;
+        (d - t * d.dot(t)).normalize_or_zero()
+    };
+    let (da, db) = (side(a.frame.o), side(b.frame.o));
+    if da == DVec3::ZERO || db == DVec3::ZERO {
+        return 0.0;
+    }
+    180.0 - da.dot(db).clamp(-1.0, 1.0).acos().to_degrees()
 }
 
 /// Finds the best-supported surface among the remaining points and removes its inliers.

@@ -1,0 +1,225 @@
+//! Out-of-core invariants: tile independence, resumption after kills and interrupts, refusal
+//! of changed jobs, directory catalogs.
+
+use crease::curves::{read_obj, Polyline};
+use crease::extract::Params;
+use crease::io::Filter;
+use crease::run::{run_extract, RunOptions};
+use glam::DVec3;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(name)
+}
+
+fn opts(tile: Option<f64>) -> RunOptions {
+    RunOptions { memory: 1 << 30, tile_size: tile, force: true, progress: crease::progress::Mode::Quiet }
+}
+
+/// Largest distance from a vertex of `a` to the polylines of `b`.
+fn directed(a: &[Polyline], b: &[Polyline]) -> f64 {
+    let segs: Vec<(DVec3, DVec3)> = b.iter().flat_map(|c| c.segments().collect::<Vec<_>>()).collect();
+    let d = |p: DVec3| {
+        segs.iter()
+            .map(|&(s, e)| {
+                let ab = e - s;
+                let t = if ab.length_squared() > 0.0 { ((p - s).dot(ab) / ab.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
+                p.distance(s + ab * t)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    a.iter().flat_map(|c| c.vertices.iter().map(|v| d(v.p))).fold(0.0, f64::max)
+}
+
+/// 1 tile and many tiles give the same number of curves, every vertex of one within half a
+/// spacing of the other's curves.
+#[test]
+fn tile_independence() {
+    let d = tempfile::tempdir().unwrap();
+    let input = vec![fixture("fandisk.las")];
+    let one = run_extract(&input, &d.path().join("one"), &Params::default(), &Filter::default(), &opts(Some(10.0))).unwrap();
+    assert_eq!(one.tiles, 1);
+    let ref_curves = read_obj(&d.path().join("one/curves.obj")).unwrap();
+    let kappa = one.params.kappa;
+    for size in [1.0, 0.5, 0.3] {
+        let out = d.path().join(format!("t{size}"));
+        let r = run_extract(&input, &out, &Params::default(), &Filter::default(), &opts(Some(size))).unwrap();
+        let c = read_obj(&out.join("curves.obj")).unwrap();
+        eprintln!("tile {size}: {} tiles, {} curves (1 tile: {})", r.tiles, c.len(), ref_curves.len());
+        assert!(r.tiles > 1);
+        assert_eq!(c.len(), ref_curves.len(), "curve count with {} tiles", r.tiles);
+        let (ab, ba) = (directed(&c, &ref_curves), directed(&ref_curves, &c));
+        assert!(ab <= 0.5 * kappa && ba <= 0.5 * kappa, "{} tiles: {ab} / {ba} vs kappa {kappa}", r.tiles);
+    }
+}
+
+fn crease() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_crease"))
+}
+
+fn outputs(dir: &Path) -> Vec<Vec<u8>> {
+    ["curves.obj", "curves.ply", "curves.geojson"].iter().map(|f| std::fs::read(dir.join(f)).unwrap()).collect()
+}
+
+/// Kill -9 at ten moments spread over the run, resume each time: the outputs are byte for byte
+/// those of an uninterrupted run.
+#[test]
+fn killed_and_resumed_runs_match_an_uninterrupted_run() {
+    let d = tempfile::tempdir().unwrap();
+    let input = fixture("fandisk.las");
+    let args = |out: &Path| {
+        let mut c = crease();
+        c.args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", "0.2", "-q"]);
+        c
+    };
+    let clean = d.path().join("clean");
+    let t = std::time::Instant::now();
+    assert!(args(&clean).status().unwrap().success());
+    let full = t.elapsed();
+    let expect = outputs(&clean);
+    let out = d.path().join("killed");
+    let mut kills = 0;
+    for k in 0..10u32 {
+        // Each attempt resumes the last, so short, varied delays (pseudo-random but fixed)
+        // spread the kills over the whole run, from bucketing to the outputs.
+        let frac = 0.04 + 0.12 * ((k as f64 * 0.618_034) % 1.0);
+        let mut child = args(&out).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+        std::thread::sleep(full.mul_f64(frac));
+        if child.try_wait().unwrap().is_none() {
+            child.kill().unwrap();
+            kills += 1;
+        }
+        child.wait().unwrap();
+    }
+    assert!(kills >= 5, "only {kills} kills landed before the run finished");
+    let status = args(&out).status().unwrap();
+    assert!(status.success());
+    let got = outputs(&out);
+    for (k, (a, b)) in got.iter().zip(&expect).enumerate() {
+        assert!(a == b, "output {k} differs from the uninterrupted run ({} vs {} bytes)", a.len(), b.len());
+    }
+}
+
+#[test]
+fn interrupt_then_rerun_and_status() {
+    let d = tempfile::tempdir().unwrap();
+    let input = fixture("fandisk.las");
+    let out = d.path().join("run");
+    let mut child = crease()
+        .args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", "0.2", "-q"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(700));
+    let interrupted = child.try_wait().unwrap().is_none();
+    if interrupted {
+        unsafe { libc_kill(child.id() as i32, 2) };
+    }
+    let o = child.wait_with_output().unwrap();
+    if interrupted {
+        assert_eq!(o.status.code(), Some(130), "{}", String::from_utf8_lossy(&o.stderr));
+        let s = crease().args(["status", out.to_str().unwrap()]).output().unwrap();
+        let text = String::from_utf8_lossy(&s.stdout);
+        assert!(s.status.success());
+        assert!(!text.contains("finished"), "{text}");
+    }
+    let o = crease().args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", "0.2", "-q"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = crease().args(["status", out.to_str().unwrap(), "--json"]).output().unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&s.stdout).unwrap();
+    assert_eq!(v["finished"], true);
+}
+
+extern "C" {
+    #[link_name = "kill"]
+    fn libc_kill(pid: i32, sig: i32) -> i32;
+}
+
+#[test]
+fn changed_job_is_refused_unless_forced() {
+    let d = tempfile::tempdir().unwrap();
+    let input = d.path().join("cube.las");
+    std::fs::copy(fixture("cube.las"), &input).unwrap();
+    let out = d.path().join("run");
+    let run = |extra: &[&str]| {
+        let mut c = crease();
+        c.args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]).args(extra);
+        c.output().unwrap()
+    };
+    assert!(run(&[]).status.success());
+    let o = run(&["--step", "0.05"]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("parameters changed") && e.contains("--force"), "{e}");
+    // Touch the input: its time changes.
+    std::thread::sleep(Duration::from_millis(20));
+    let bytes = std::fs::read(&input).unwrap();
+    std::fs::write(&input, bytes).unwrap();
+    let o = run(&[]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("cube.las changed"), "{e}");
+    assert!(run(&["--force"]).status.success());
+    assert!(run(&[]).status.success(), "the forced run is now the directory's job");
+}
+
+#[test]
+fn unwritable_run_directory() {
+    let d = tempfile::tempdir().unwrap();
+    let blocker = d.path().join("file");
+    std::fs::write(&blocker, "not a directory").unwrap();
+    let o = crease().args(["extract", fixture("cube.las").to_str().unwrap(), "-o", blocker.join("run").to_str().unwrap(), "-q"]).output().unwrap();
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("run") && !e.contains("panicked"), "{e}");
+}
+
+/// A directory of files cut from one cloud gives the same curves as the cloud itself.
+#[test]
+fn directory_catalog_matches_single_file() {
+    let d = tempfile::tempdir().unwrap();
+    let pts = crease::io::PointReader::open(&fixture("fandisk.las"), &Filter::default()).unwrap().read_all().unwrap();
+    let cat = d.path().join("cat");
+    std::fs::create_dir_all(&cat).unwrap();
+    // A 3 x 3 grid of files over x and z.
+    let b = crease::cloud::Bounds::of(pts.xyz.iter().copied());
+    let cell = |v: f64, lo: f64, hi: f64| (((v - lo) / (hi - lo) * 3.0) as usize).min(2);
+    let mut parts: Vec<Vec<DVec3>> = vec![vec![]; 9];
+    for p in &pts.xyz {
+        parts[cell(p.x, b.min[0], b.max[0]) * 3 + cell(p.z, b.min[2], b.max[2])].push(*p);
+    }
+    let wo = crease::io::WriteOptions { scale: 1e-6, offset: DVec3::ZERO, epsg: None };
+    for (k, part) in parts.iter().enumerate() {
+        let mut w = crease::io::PointWriter::create(&cat.join(format!("part{k}.las")), &wo).unwrap();
+        w.write(part, &vec![1; part.len()]).unwrap();
+        w.finish().unwrap();
+    }
+    let single = run_extract(&[fixture("fandisk.las")], &d.path().join("single"), &Params::default(), &Filter::default(), &opts(None)).unwrap();
+    run_extract(&[cat], &d.path().join("multi"), &Params::default(), &Filter::default(), &opts(None)).unwrap();
+    let a = read_obj(&d.path().join("single/curves.obj")).unwrap();
+    let c = read_obj(&d.path().join("multi/curves.obj")).unwrap();
+    assert_eq!(a.len(), c.len());
+    let k = single.params.kappa;
+    let (ac, ca) = (directed(&a, &c), directed(&c, &a));
+    assert!(ac <= 0.5 * k && ca <= 0.5 * k, "{ac} / {ca} vs kappa {k}");
+}
+
+#[test]
+fn catalog_with_mixed_crs_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let cat = d.path().join("cat");
+    std::fs::create_dir_all(&cat).unwrap();
+    for (k, epsg) in [(0, 25832u16), (1, 2154)] {
+        let wo = crease::io::WriteOptions { scale: 0.001, offset: DVec3::ZERO, epsg: Some(epsg) };
+        let mut w = crease::io::PointWriter::create(&cat.join(format!("f{k}.las")), &wo).unwrap();
+        let pts: Vec<DVec3> = (0..100).map(|i| DVec3::new(i as f64, (i * 7 % 13) as f64, 0.0)).collect();
+        w.write(&pts, &vec![2; 100]).unwrap();
+        w.finish().unwrap();
+    }
+    let o = crease().args(["extract", cat.to_str().unwrap(), "-o", d.path().join("run").to_str().unwrap(), "-q"]).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("f1.las") && e.contains("CRS EPSG:2154 differs from EPSG:25832"), "{e}");
+}
