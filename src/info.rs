@@ -43,7 +43,7 @@ pub fn file_info(path: &Path) -> Result<FileInfo> {
 /// Both are handled by comparing the block's share of the points with its share of the area
 /// (areas from the two largest extents of the bounding boxes), assuming even density.
 pub fn estimate_spacing(block: &[DVec3], total: u64, bounds: &Bounds) -> f64 {
-    let d = crate::spacing::median_nn_distance(block, 20_000);
+    let d = crate::spacing::spacing(block, 20_000);
     if block.len() < 2 || total == 0 || bounds.is_empty() {
         return d;
     }

@@ -1,13 +1,13 @@
-//! The mean point spacing kappa, from which every length default is derived.
+//! The point spacing kappa, from which every length default is derived.
 
 use crate::spatial::Index;
 use glam::DVec3;
 
-/// Median nearest-neighbour distance of a point set, measured at up to `samples` points spread
-/// evenly through it (queries run against all points, so the value is exact for the sample).
-/// Duplicate points (distance 0) are skipped. Returns 0 for fewer than two distinct points.
-pub fn median_nn_distance(points: &[DVec3], samples: usize) -> f64 {
-    if points.len() < 2 {
+/// Median distance to the `k`-th nearest other point, measured at up to `samples` points spread
+/// evenly through `points` (queries run against all points, so each value is exact). Returns 0
+/// for too few points.
+fn median_kth_distance(points: &[DVec3], k: usize, samples: usize) -> f64 {
+    if points.len() <= k {
         return 0.0;
     }
     let origin = points[0];
@@ -18,12 +18,16 @@ pub fn median_nn_distance(points: &[DVec3], samples: usize) -> f64 {
     let mut nn = Vec::new();
     for q in local.iter().step_by(step) {
         nn.clear();
-        index.nearest_n(q, 4, &mut nn);
-        if let Some(&(_, d2)) = nn.iter().find(|(_, d2)| *d2 > 0.0) {
+        index.nearest_n(q, k + 1, &mut nn);
+        if let Some(&(_, d2)) = nn.last() {
             d.push(d2.sqrt());
         }
     }
-    median(&mut d) as f64
+    if d.is_empty() {
+        return 0.0;
+    }
+    let m = d.len() / 2;
+    *d.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1 as f64
 }
 
 /// The point spacing kappa: the median nearest-neighbour distance for evenly sampled
@@ -34,41 +38,6 @@ pub fn median_nn_distance(points: &[DVec3], samples: usize) -> f64 {
 /// sqrt(ln 2 / (pi rho)); their ratio converts one into the other.
 pub fn spacing(points: &[DVec3], samples: usize) -> f64 {
     const K: usize = 16;
-    if points.len() <= K {
-        return median_nn_distance(points, samples);
-    }
-    let origin = points[0];
-    let local: Vec<[f32; 3]> = points.iter().map(|p| (*p - origin).as_vec3().to_array()).collect();
-    let index = Index::new(&local);
-    let step = (points.len() / samples.max(1)).max(1);
-    let mut d: Vec<f32> = Vec::new();
-    let mut nn = Vec::new();
-    for q in local.iter().step_by(step) {
-        nn.clear();
-        index.nearest_n(q, K + 1, &mut nn);
-        if let Some(&(_, d2)) = nn.last() {
-            d.push(d2.sqrt());
-        }
-    }
-    let rk = median(&mut d) as f64;
-    rk * ((2f64).ln() / K as f64).sqrt()
-}
-
-/// Spacing estimate from a random-like subsample of a surface: the median nearest-neighbour
-/// distance within the sample, scaled by sqrt(sample / total) since on a surface spacing goes
-/// as one over the square root of density.
-pub fn spacing_from_subsample(sample: &[DVec3], total: u64) -> f64 {
-    let d = median_nn_distance(sample, 20_000);
-    if total == 0 || sample.is_empty() {
-        return d;
-    }
-    d * (sample.len() as f64 / total as f64).min(1.0).sqrt()
-}
-
-fn median(v: &mut [f32]) -> f32 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let m = v.len() / 2;
-    *v.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
+    let k = K.min(points.len().saturating_sub(1)).max(1);
+    median_kth_distance(points, k, samples) * ((2f64).ln() / k as f64).sqrt()
 }
