@@ -15,7 +15,8 @@ cloud=$work/${shape}_${n}_$noise.las
 [ -f "$cloud" ] || "$bin" synth shape "$shape" -n "$n" --noise "$noise" -o "$cloud" 2>/dev/null
 for threads in 2 1; do
   for i in 1 2 3; do
-    "$bin" extract "$cloud" -o "$work/run_$threads" -q --force --threads $threads
+    rm -rf "$work/run_$threads"
+    "$bin" extract "$cloud" -o "$work/run_$threads" -q --threads $threads
     python3 - "$work/run_$threads/report.json" "$threads" <<'PY'
 import json, sys
 r = json.load(open(sys.argv[1])); p = r["pass_seconds"]; s = r["seconds"]

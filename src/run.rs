@@ -387,15 +387,16 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             tile_pass(&progress, "statistics", &tiles, &sdir, |t| {
                 let (tp, core) = load(&store, &grid, t, halo0, 1.0, seed, kq)?;
                 let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
-                let mut buf = Vec::new();
+                use rayon::prelude::*;
+                let sample: Vec<usize> = (0..cloud.len())
+                    .filter(|&i| core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed))
+                    .collect();
+                let stats: Vec<Option<(f64, f64, f64)>> =
+                    sample.par_iter().map_init(Vec::new, |buf, &i| extract::point_stats(&cloud, i, buf)).collect();
                 let mut out: Vec<u8> = Vec::new();
-                for i in 0..cloud.len() {
-                    if core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed) {
-                        if let Some(s) = extract::point_stats(&cloud, i, &mut buf) {
-                            for v in [s.0, s.1, s.2] {
-                                out.extend_from_slice(&v.to_le_bytes());
-                            }
-                        }
+                for s in stats.into_iter().flatten() {
+                    for v in [s.0, s.1, s.2] {
+                        out.extend_from_slice(&v.to_le_bytes());
                     }
                 }
                 Ok(out)

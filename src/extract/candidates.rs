@@ -24,7 +24,7 @@ pub fn residuals(cloud: &Cloud, which: &[u32], r: f64) -> Vec<f32> {
 
 fn residual_at(cloud: &Cloud, i: usize, r: f64, buf: &mut Vec<(u32, f32)>, pts: &mut Vec<(DVec3, f64)>) -> f32 {
     let q = cloud.at(i);
-    cloud.neighbours(q, r, MIN_FIT_NEIGHBOURS, MAX_FIT_NEIGHBOURS, buf);
+    cloud.neighbours_in(q, r, MIN_FIT_NEIGHBOURS, MAX_FIT_NEIGHBOURS, false, buf);
     if buf.len() < 8 {
         // Too sparse to fit a quadratic: not evidence of a feature.
         return 0.0;

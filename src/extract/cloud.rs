@@ -76,10 +76,24 @@ impl Cloud {
         self.pos[i]
     }
 
+    /// Number of points within `r` of local position `q` (membership decided in f64).
+    pub fn count_within(&self, q: DVec3, r: f64, buf: &mut Vec<(u32, f32)>) -> usize {
+        buf.clear();
+        self.index.within(&q.as_vec3().to_array(), (r * (1.0 + 1e-5)) as f32 + f32::EPSILON, buf);
+        buf.iter().filter(|a| self.pos[a.0 as usize].distance_squared(q) <= r * r).count()
+    }
+
     /// Indices (and squared distances) of the points within `r` of local position `q`, or the
     /// `min` nearest where the ball holds fewer (sparse regions of unevenly sampled scans); at
     /// most about `max` of them, an even subsample of the ball when there are more.
     pub fn neighbours(&self, q: DVec3, r: f64, min: usize, max: usize, out: &mut Vec<(u32, f32)>) {
+        self.neighbours_in(q, r, min, max, true, out)
+    }
+
+    /// As [`Cloud::neighbours`]; with `ordered` false the points come in the tree's order
+    /// unless they must be subsampled (for order-insensitive uses such as least-squares sums,
+    /// where only the last bits can depend on it).
+    pub fn neighbours_in(&self, q: DVec3, r: f64, min: usize, max: usize, ordered: bool, out: &mut Vec<(u32, f32)>) {
         out.clear();
         // Query the f32 tree a little wide, then decide membership in f64, so the ball holds
         // the same points wherever the tile's origin lies.
@@ -100,6 +114,9 @@ impl Cloud {
         // Neighbours in coordinate order: every fit, subsample and choice over them is then
         // the same whatever the tiling, the thread count, or how the points were split into
         // files.
+        if !ordered && out.len() <= max {
+            return;
+        }
         out.sort_unstable_by(|a, b| {
             let (p, q) = (self.pos[a.0 as usize], self.pos[b.0 as usize]);
             p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(self.gid[a.0 as usize].cmp(&self.gid[b.0 as usize]))

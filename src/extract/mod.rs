@@ -210,9 +210,8 @@ pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option
     let q = cloud.at(i);
     let rk = buf.iter().map(|b| cloud.at(b.0 as usize).distance_squared(q)).fold(0.0f64, f64::max).sqrt();
     let kappa = rk * (2f64.ln() / K as f64).sqrt();
-    cloud.neighbours(q, 16.0 * kappa, 0, usize::MAX, buf);
     // Points per unit area around this point, from the count in the 16-kappa ball.
-    let density = buf.len() as f64 / (std::f64::consts::PI * (16.0 * kappa).powi(2));
+    let density = cloud.count_within(q, 16.0 * kappa, buf) as f64 / (std::f64::consts::PI * (16.0 * kappa).powi(2));
     cloud.neighbours(q, 16.0 * kappa, 0, 128, buf);
     if buf.len() < 10 {
         return Some((kappa, 0.0, density));
