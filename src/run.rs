@@ -386,7 +386,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             std::fs::create_dir_all(&sdir).map_err(|e| Error::output(&sdir, e))?;
             tile_pass(&progress, "statistics", &tiles, &sdir, |t| {
                 let (tp, core) = load(&store, &grid, t, halo0, 1.0, seed, kq)?;
-                let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
+                let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&tp));
                 use rayon::prelude::*;
                 let sample: Vec<usize> = (0..cloud.len())
                     .filter(|&i| core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed))
@@ -429,7 +429,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     std::fs::create_dir_all(&rdir).map_err(|e| Error::output(&rdir, e))?;
     tile_pass(&progress, "residuals", &tiles, &rdir, |t| {
         let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed, kq)?;
-        let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
+        let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&tp));
         let which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
         let res = extract::candidates::residuals(&cloud, &which, r.fit_radius);
         let mut pairs: Vec<(u64, f32)> = which.iter().zip(&res).map(|(&i, &x)| (cloud.gid[i as usize], x)).collect();
@@ -467,7 +467,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     tile_pass(&progress, "projection", &tiles, &edir, |t| {
         let res = residuals_of(t)?;
         let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed, kq)?;
-        let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&grid, t, &tp));
+        let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&tp));
         let cand: Vec<u32> = (0..cloud.len() as u32)
             .filter(|&i| core[cloud.ids[i as usize] as usize])
             .filter(|&i| {
@@ -537,8 +537,9 @@ fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs) -> R
     Ok(())
 }
 
-fn tile_origin(grid: &Grid, t: u32, tp: &TilePoints) -> DVec3 {
-    let _ = (grid, t);
+/// Local origin of a loaded tile: the minimum corner of its points (fits are computed in f64,
+/// so the choice only moves the last bits).
+fn tile_origin(tp: &TilePoints) -> DVec3 {
     tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
 }
 

@@ -331,6 +331,8 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
     let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: 2.0 * r.rmls_radius };
     let smoothed = smooth::smooth(&edge_pos, &grouped, &sp);
     seconds.smoothing = t.elapsed().as_secs_f64();
+    // Diagnostics: with CREASE_DEBUG_DIR set, the edge cloud, its smoothed form, the corners
+    // and the grown polylines are written there as OBJ files.
     if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
         let dump = |name: &str, pts: &[DVec3]| {
             let text: String = pts.iter().map(|p| { let p = *p + origin; format!("v {} {} {}\n", p.x, p.y, p.z) }).collect();

@@ -9,7 +9,7 @@
 
 use super::rng::Rng;
 use super::surface::{AreaTable, Frame, Surface};
-use super::{perturb, truth_polylines};
+use super::truth_polylines;
 use crate::curves::write_obj;
 use crate::error::{Error, Result};
 use crate::io::{PointWriter, WriteOptions};
@@ -198,7 +198,6 @@ pub fn write_scene(opts: &SceneOptions, out: &Path) -> Result<u64> {
         }
     }
     w.finish()?;
-    let _ = perturb; // scene noise is absolute (metres), not relative to the diagonal
     write_obj(&super::truth_path(out), &truth_polylines(&truth))?;
     Ok(written)
 }
