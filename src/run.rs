@@ -139,6 +139,13 @@ pub struct PassSeconds {
     pub projection: f64,
     /// Stages 3-5 on the edge cloud.
     pub curves: f64,
+    /// Of the statistics pass, seconds the loader thread spent reading tiles and building
+    /// their k-d trees (overlapping the fits of the tile before).
+    pub statistics_load: f64,
+    /// The same for the residual pass.
+    pub residuals_load: f64,
+    /// The same for the projection pass.
+    pub projection_load: f64,
     /// Writing outputs.
     pub writing: f64,
 }
@@ -384,9 +391,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             let halo0 = 24.0 * kappa0;
             let sdir = dir.join("stats");
             std::fs::create_dir_all(&sdir).map_err(|e| Error::output(&sdir, e))?;
-            tile_pass(&progress, "statistics", &tiles, &sdir, |t| {
-                let (tp, core) = load(&store, &grid, t, halo0, 1.0, seed, kq)?;
-                let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&tp));
+            let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t| load_cloud(&store, &grid, t, halo0, 1.0, seed, kq), |_, (cloud, core)| {
                 use rayon::prelude::*;
                 let sample: Vec<usize> = (0..cloud.len())
                     .filter(|&i| core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed))
@@ -401,6 +406,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
                 }
                 Ok(out)
             })?;
+            pass.statistics_load = time.load;
             let mut stats = vec![];
             for &t in &tiles {
                 let b = read_result(&sdir, t)?;
@@ -427,9 +433,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let t = Instant::now();
     let rdir = dir.join("resid");
     std::fs::create_dir_all(&rdir).map_err(|e| Error::output(&rdir, e))?;
-    tile_pass(&progress, "residuals", &tiles, &rdir, |t| {
-        let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed, kq)?;
-        let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&tp));
+    let time = tile_pass(&progress, "residuals", &tiles, &rdir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |_, (cloud, core)| {
         let which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
         let res = extract::candidates::residuals(&cloud, &which, r.fit_radius);
         let mut pairs: Vec<(u64, f32)> = which.iter().zip(&res).map(|(&i, &x)| (cloud.gid[i as usize], x)).collect();
@@ -441,6 +445,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         }
         Ok(out)
     })?;
+    pass.residuals_load = time.load;
     // tau: the mean residual over all points (summed in tile order, in f64).
     let mut sum = 0.0f64;
     let mut count = 0u64;
@@ -464,10 +469,8 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let t = Instant::now();
     let edir = dir.join("edges");
     std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
-    tile_pass(&progress, "projection", &tiles, &edir, |t| {
+    let time = tile_pass(&progress, "projection", &tiles, &edir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |t, (cloud, core)| {
         let res = residuals_of(t)?;
-        let (tp, core) = load(&store, &grid, t, halo, r.keep, r.seed, kq)?;
-        let cloud = Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&tp));
         let cand: Vec<u32> = (0..cloud.len() as u32)
             .filter(|&i| core[cloud.ids[i as usize] as usize])
             .filter(|&i| {
@@ -478,6 +481,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         let (edges, corners, one) = extract::project_core(&cloud, &cand, &r);
         Ok(encode_edges(&edges, &corners, cand.len() as u64, one))
     })?;
+    pass.projection_load = time.load;
     pass.projection = t.elapsed().as_secs_f64();
 
     // Curves from the whole edge cloud.
@@ -543,6 +547,12 @@ fn tile_origin(tp: &TilePoints) -> DVec3 {
     tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
 }
 
+/// Loads tile `t` with its halo (see [`load`]) and indexes it.
+fn load_cloud(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64, kq: f64) -> Result<(Cloud, Vec<bool>)> {
+    let (tp, core) = load(store, grid, t, halo, keep, seed, kq)?;
+    Ok((Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&tp)), core))
+}
+
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by id hash); the
 /// flags say which points are core.
 fn load(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64, kq: f64) -> Result<(TilePoints, Vec<bool>)> {
@@ -552,9 +562,9 @@ fn load(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64, kq:
     for n in grid.around(t, halo) {
         let before = tp.xyz.len();
         if n == t {
-            store.read(n, &mut tp, |p, _| extract::keep_point(extract::position_key(p, kq), keep, seed))?;
+            store.read(n, &mut tp, |p, _| keep >= 1.0 || extract::keep_point(extract::position_key(p, kq), keep, seed))?;
         } else {
-            store.read(n, &mut tp, |p, _| within(&core, halo, p) && extract::keep_point(extract::position_key(p, kq), keep, seed))?;
+            store.read(n, &mut tp, |p, _| within(&core, halo, p) && (keep >= 1.0 || extract::keep_point(extract::position_key(p, kq), keep, seed)))?;
         }
         is_core.extend(std::iter::repeat(n == t).take(tp.xyz.len() - before));
     }
@@ -571,46 +581,68 @@ fn read_result(dir: &Path, t: u32) -> Result<Vec<u8>> {
     zstd::decode_all(&z[..]).map_err(|e| Error::input(&p, format!("corrupt tile result: {e}")))
 }
 
-/// Runs `f` on every tile without a result in `dir`, in order, storing each result atomically.
-/// The next tile is loaded by `f` itself; tiles are independent, so an interrupted pass resumes
-/// with the first tile that has no result.
-fn tile_pass(progress: &crate::progress::Progress, name: &str, tiles: &[u32], dir: &Path, f: impl Fn(u32) -> Result<Vec<u8>> + Sync) -> Result<()> {
+/// Seconds a tile pass spent loading tiles (reading the store, building the k-d tree: on the
+/// loader thread, overlapping compute) and computing them.
+#[derive(Clone, Copy, Debug, Default)]
+struct PassTime {
+    load: f64,
+    compute: f64,
+}
+
+/// Runs every tile without a result in `dir` through `load` then `compute`, in order, storing
+/// each result atomically. A loader thread loads the next tile while the current one computes
+/// (rayon, inside `compute`) and is written, so reading and building overlap the fits; the
+/// rendezvous channel keeps at most two tiles in memory. Tiles are independent, so an
+/// interrupted pass resumes with the first tile that has no result.
+fn tile_pass<T: Send>(
+    progress: &crate::progress::Progress,
+    name: &str,
+    tiles: &[u32],
+    dir: &Path,
+    load: impl Fn(u32) -> Result<T> + Sync,
+    compute: impl Fn(u32, T) -> Result<Vec<u8>> + Sync,
+) -> Result<PassTime> {
     let todo: Vec<u32> = tiles.iter().copied().filter(|&t| !result_path(dir, t).exists()).collect();
     let bar = progress.bar(name, tiles.len() as u64, "tiles");
     bar.inc((tiles.len() - todo.len()) as u64);
-    // A loader thread runs `f` one tile ahead of the writer: compute (rayon, inside `f`) and
-    // disk writes overlap, and at most two tiles are in memory.
-    let (tx, rx) = crossbeam_channel::bounded::<(u32, Result<Vec<u8>>)>(1);
-    let f = &f;
+    let (tx, rx) = crossbeam_channel::bounded::<(u32, Result<T>)>(0);
+    let load = &load;
     let todo = &todo;
-    let bar_ref = &bar;
-    std::thread::scope(move |s| -> Result<()> {
-        let bar = bar_ref;
+    let mut time = PassTime::default();
+    let load_time = std::thread::scope(|s| -> Result<f64> {
         // Owning the receiver here drops it on any early return, which unblocks the loader
         // (its send fails) before the scope joins it.
         let rx = rx;
-        s.spawn(move || {
+        let loader = s.spawn(move || {
+            let mut secs = 0.0;
             for &t in todo {
                 if STOP.load(Ordering::SeqCst) {
                     break;
                 }
-                if tx.send((t, f(t))).is_err() {
+                let t0 = Instant::now();
+                let x = load(t);
+                secs += t0.elapsed().as_secs_f64();
+                if tx.send((t, x)).is_err() {
                     break;
                 }
             }
+            secs
         });
-        for (t, out) in rx.iter() {
-            let out = out?;
+        for (t, x) in rx.iter() {
+            let t0 = Instant::now();
+            let out = compute(t, x?)?;
+            time.compute += t0.elapsed().as_secs_f64();
             let z = zstd::encode_all(&out[..], 1).map_err(|e| Error::output(dir, e))?;
             write_atomic(&result_path(dir, t), &z)?;
             bar.inc(1);
             check_stop()?;
         }
-        Ok(())
+        Ok(loader.join().unwrap_or(0.0))
     })?;
+    time.load = load_time;
     check_stop()?;
     bar.finish();
-    Ok(())
+    Ok(time)
 }
 
 fn encode_edges(edges: &[WorldEdge], corners: &[WorldCorner], candidates: u64, one: u64) -> Vec<u8> {

@@ -185,7 +185,10 @@ pub fn key_quantum(diag: f64) -> f64 {
 /// of how a cloud is split.
 pub fn position_key(p: DVec3, q: f64) -> u64 {
     let w = (p / q).round();
-    let bytes: Vec<u8> = w.to_array().iter().flat_map(|v| (*v as i64).to_le_bytes()).collect();
+    let mut bytes = [0u8; 24];
+    for (k, v) in w.to_array().iter().enumerate() {
+        bytes[8 * k..8 * k + 8].copy_from_slice(&(*v as i64).to_le_bytes());
+    }
     crate::run::fnv1a(&bytes)
 }
 
