@@ -4,10 +4,9 @@
 //! are fitted to the neighbourhood; the residual is the largest distance of a neighbour from the
 //! quadratic along the plane normal. Points with residual above tau are candidates.
 
-use super::cloud::Cloud;
+use super::cloud::{Cloud, Neighbourhood};
 use super::fit::{Frame, Pca, Quadric};
 use glam::DVec3;
-use rayon::prelude::*;
 
 /// Most neighbours used by one fit (the nearest ones).
 pub const MAX_FIT_NEIGHBOURS: usize = 160;
@@ -16,15 +15,11 @@ pub const MIN_FIT_NEIGHBOURS: usize = 20;
 
 /// The fit residual of every point in `which`, for neighbourhood radius `r`.
 pub fn residuals(cloud: &Cloud, which: &[u32], r: f64) -> Vec<f32> {
-    which
-        .par_iter()
-        .map_init(|| (Vec::new(), Vec::new()), |(buf, pts), &i| residual_at(cloud, i as usize, r, buf, pts))
-        .collect()
+    let nb = Neighbourhood { radius: r, min: MIN_FIT_NEIGHBOURS, max: MAX_FIT_NEIGHBOURS, ordered: false };
+    cloud.map_neighbourhoods(which, nb, Vec::new, |pts, i, buf| residual_of(cloud, i as usize, r, buf, pts))
 }
 
-fn residual_at(cloud: &Cloud, i: usize, r: f64, buf: &mut Vec<(u32, f32)>, pts: &mut Vec<(DVec3, f64)>) -> f32 {
-    let q = cloud.at(i);
-    cloud.neighbours_in(q, r, MIN_FIT_NEIGHBOURS, MAX_FIT_NEIGHBOURS, false, buf);
+fn residual_of(cloud: &Cloud, _i: usize, r: f64, buf: &[(u32, f32)], pts: &mut Vec<(DVec3, f64)>) -> f32 {
     if buf.len() < 8 {
         // Too sparse to fit a quadratic: not evidence of a feature.
         return 0.0;
