@@ -486,8 +486,16 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
 
     // Curves from the whole edge cloud.
     let t = Instant::now();
-    let mut edges = vec![];
-    let mut corners = vec![];
+    // The edge cloud is gathered into vectors sized from the results' headers, so it is never
+    // held more than once during the gathering.
+    let (mut ne, mut nc) = (0usize, 0usize);
+    for &t in &tiles {
+        let (e, c) = edge_counts(&edir, t)?;
+        ne += e;
+        nc += c;
+    }
+    let mut edges = Vec::with_capacity(ne);
+    let mut corners = Vec::with_capacity(nc);
     let mut counts = Counts { points: count, ..Default::default() };
     for &t in &tiles {
         let (e, c, n, one) = decode_edges(&read_result(&edir, t)?, &edir.join(format!("{t}.bin")))?;
@@ -667,6 +675,17 @@ fn encode_edges(edges: &[WorldEdge], corners: &[WorldCorner], candidates: u64, o
         out.extend_from_slice(&c.w.to_le_bytes());
     }
     out
+}
+
+/// Edge and corner counts of a projection result, from its header alone.
+fn edge_counts(dir: &Path, t: u32) -> Result<(usize, usize)> {
+    let p = result_path(dir, t);
+    let f = std::fs::File::open(&p).map_err(|e| Error::input(&p, e.to_string()))?;
+    let mut head = [0u8; 16];
+    let mut z = zstd::Decoder::new(f).map_err(|e| Error::input(&p, e.to_string()))?;
+    std::io::Read::read_exact(&mut z, &mut head).map_err(|e| Error::input(&p, format!("corrupt tile result: {e}")))?;
+    let u = |o: usize| u64::from_le_bytes(head[o..o + 8].try_into().unwrap()) as usize;
+    Ok((u(0), u(8)))
 }
 
 type Decoded = (Vec<WorldEdge>, Vec<WorldCorner>, u64, u64);

@@ -329,11 +329,15 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
     let local_corners: Vec<project::CornerPoint> = corners.iter().map(|c| project::CornerPoint { p: c.p - origin, w: c.w }).collect();
     let grouped = project::group_corners(&local_corners, r.corner_radius, 3);
     counts.corners = grouped.len() as u64;
-    let local: Vec<project::EdgePoint> = edges.iter().map(|e| project::EdgePoint { p: e.p - origin, n: [e.n[0].as_dvec3(), e.n[1].as_dvec3()] }).collect();
-    let edge_pos: Vec<DVec3> = local.iter().map(|e| e.p).collect();
+    // (The edge cloud is the one part of a run that grows with the whole input, not with a
+    // tile: it is kept once, in world coordinates with f32 normals, and only its local
+    // positions are added.)
+    let edge_pos: Vec<DVec3> = edges.iter().map(|e| e.p - origin).collect();
     let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: 2.0 * r.rmls_radius };
     let smoothed = smooth::smooth(&edge_pos, &grouped, &sp);
     seconds.smoothing = t.elapsed().as_secs_f64();
+    let normals: Vec<[glam::Vec3; 2]> = edges.iter().map(|e| e.n).collect();
+    drop(edges);
     // Diagnostics: with CREASE_DEBUG_DIR set, the edge cloud, its smoothed form, the corners
     // and the grown polylines are written there as OBJ files.
     if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
@@ -345,6 +349,7 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
         dump("smoothed.obj", &smoothed);
         dump("corners.obj", &grouped);
     }
+    drop(edge_pos);
     let t = Instant::now();
     let grown = grow::grow(&smoothed, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg });
     counts.grown = grown.len() as u64;
@@ -356,7 +361,7 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
     let t = Instant::now();
     let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2 };
     let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), &grouped, &cp);
-    let curves = to_polylines(&curves, &smoothed, &local, origin, r.step);
+    let curves = to_polylines(&curves, &smoothed, &normals, origin, r.step);
     counts.curves = curves.len() as u64;
     seconds.completion = t.elapsed().as_secs_f64();
     curves
@@ -420,7 +425,7 @@ pub fn keep_point(id: u64, keep: f64, seed: u64) -> bool {
 
 /// Attaches normals (from the nearest edge points, orientation carried along each curve) and
 /// converts to world coordinates.
-fn to_polylines(curves: &[complete::Curve], smoothed: &[DVec3], edges: &[project::EdgePoint], origin: DVec3, step: f64) -> Vec<Polyline> {
+fn to_polylines(curves: &[complete::Curve], smoothed: &[DVec3], edge_normals: &[[glam::Vec3; 2]], origin: DVec3, step: f64) -> Vec<Polyline> {
     let f32s: Vec<[f32; 3]> = smoothed.iter().map(|q| q.as_vec3().to_array()).collect();
     let index = (!f32s.is_empty()).then(|| Index::new(&f32s));
     let mut nn = Vec::new();
@@ -443,9 +448,10 @@ fn to_polylines(curves: &[complete::Curve], smoothed: &[DVec3], edges: &[project
                 }
                 nn.sort_unstable_by_key(|a| a.0);
                 let mut acc = [DVec3::ZERO; 2];
+                let pair = |j: u32| edge_normals[j as usize].map(|v| v.as_dvec3());
                 for &(j, _) in &nn {
-                    let n = edges[j as usize].n;
-                    let reference = prev.unwrap_or(edges[nn[0].0 as usize].n);
+                    let n = pair(j);
+                    let reference = prev.unwrap_or(pair(nn[0].0));
                     acc[0] += align(n, reference)[0];
                     acc[1] += align(n, reference)[1];
                 }

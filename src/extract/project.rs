@@ -11,11 +11,10 @@
 //! (an edge point keeping both normals); with three or more, a corner point is also solved.
 //! Projections that move farther than the neighbourhood radius are culled (2008).
 
-use super::cloud::Cloud;
+use super::cloud::{Cloud, Neighbourhood};
 use super::fit::{project_to_corner, project_to_intersection, Frame, Pca, Quadric};
 use crate::synth::rng::Rng;
 use glam::DVec3;
-use rayon::prelude::*;
 
 /// A candidate projected onto the intersection of two surfaces.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -81,14 +80,12 @@ const MAX_SURFACES: usize = 4;
 /// Projects every candidate (by index into `cloud`). `ids` gives each candidate a global
 /// identity so that its random stream does not depend on tiling or thread count.
 pub fn project(cloud: &Cloud, candidates: &[u32], ids: &[u64], p: &ProjectParams) -> Vec<Projected> {
-    candidates
-        .par_iter()
-        .zip(ids.par_iter())
-        .map_init(
-            || (Vec::new(), Scratch::default()),
-            |(buf, scratch), (&i, &id)| project_one(cloud, i as usize, id, p, buf, scratch),
-        )
-        .collect()
+    // Candidate k's stream is ids[k]; map the cloud index back to it.
+    let mut slot: Vec<(u32, u64)> = candidates.iter().copied().zip(ids.iter().copied()).collect();
+    slot.sort_unstable_by_key(|s| s.0);
+    let id_of = |i: u32| slot[slot.binary_search_by_key(&i, |s| s.0).expect("candidate")].1;
+    let nb = Neighbourhood { radius: p.radius, min: MIN_NEIGHBOURS, max: MAX_NEIGHBOURS, ordered: true };
+    cloud.map_neighbourhoods(candidates, nb, Scratch::default, |scratch, i, buf| project_one(cloud, i as usize, id_of(i), p, buf, scratch))
 }
 
 #[derive(Default)]
@@ -106,9 +103,8 @@ struct Surface {
     threshold: f64,
 }
 
-fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &mut Vec<(u32, f32)>, s: &mut Scratch) -> Projected {
+fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32, f32)], s: &mut Scratch) -> Projected {
     let x = cloud.at(i);
-    cloud.neighbours(x, p.radius, MIN_NEIGHBOURS, MAX_NEIGHBOURS, buf);
     s.pts.clear();
     s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
     let n = s.pts.len();
