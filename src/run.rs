@@ -572,7 +572,7 @@ fn load(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64, kq:
         if n == t {
             store.read(n, &mut tp, |p, _| keep >= 1.0 || extract::keep_point(extract::position_key(p, kq), keep, seed))?;
         } else {
-            store.read(n, &mut tp, |p, _| within(&core, halo, p) && (keep >= 1.0 || extract::keep_point(extract::position_key(p, kq), keep, seed)))?;
+            store.read_near(n, Some((&core, halo)), &mut tp, |p, _| within(&core, halo, p) && (keep >= 1.0 || extract::keep_point(extract::position_key(p, kq), keep, seed)))?;
         }
         is_core.extend(std::iter::repeat(n == t).take(tp.xyz.len() - before));
     }

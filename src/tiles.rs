@@ -130,25 +130,25 @@ impl Store {
         self.dir.join(format!("{t}.pts"))
     }
 
-    /// Appends points to tile `t`'s file as one compressed chunk.
+    /// Appends points to tile `t`'s file as one compressed chunk, headed by its point count,
+    /// compressed length and bounding box (so readers can skip chunks outside a region).
     pub fn append(&self, t: u32, pts: &TilePoints) -> Result<()> {
-        let n = pts.xyz.len();
-        let mut raw = Vec::with_capacity(n * 32);
-        for a in 0..3 {
-            for p in &pts.xyz {
-                raw.extend_from_slice(&p[a].to_le_bytes());
-            }
-        }
-        for g in &pts.gid {
-            raw.extend_from_slice(&g.to_le_bytes());
-        }
-        let z = zstd::bulk::compress(&raw, 1).map_err(io(&self.dir))?;
+        self.append_runs(t, pts, &[pts.xyz.len()])
+    }
+
+    /// Appends `pts` to tile `t`'s file as several chunks, of the lengths in `runs` (see
+    /// [`Store::append`]).
+    pub fn append_runs(&self, t: u32, pts: &TilePoints, runs: &[usize]) -> Result<()> {
         let path = self.path(t);
-        let mut f = std::fs::OpenOptions::new().create(true).append(true).open(&path).map_err(io(&path))?;
-        f.write_all(&(n as u32).to_le_bytes()).map_err(io(&path))?;
-        f.write_all(&(z.len() as u32).to_le_bytes()).map_err(io(&path))?;
-        f.write_all(&z).map_err(io(&path))?;
-        Ok(())
+        let f = std::fs::OpenOptions::new().create(true).append(true).open(&path).map_err(io(&path))?;
+        let mut f = std::io::BufWriter::new(f);
+        let mut zc = zstd::bulk::Compressor::new(1).map_err(io(&path))?;
+        let mut at = 0;
+        for &n in runs {
+            write_chunk(&mut zc, &mut f, &path, &pts.xyz[at..at + n], &pts.gid[at..at + n])?;
+            at += n;
+        }
+        f.flush().map_err(io(&path))
     }
 
     /// Makes every tile file durable.
@@ -161,15 +161,23 @@ impl Store {
 
     /// Streams tile `t`'s points in chunks, keeping those `keep` accepts.
     pub fn read(&self, t: u32, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<()> {
+        self.read_near(t, None, out, keep)
+    }
+
+    /// As [`Store::read`], but only chunks whose bounding box comes within the given distance
+    /// of the given box are decompressed (a tile's halo needs only its neighbours' borders).
+    pub fn read_near(&self, t: u32, near: Option<(&Bounds, f64)>, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<()> {
         let path = self.path(t);
-        let mut f = match std::fs::File::open(&path) {
+        let f = match std::fs::File::open(&path) {
             Ok(f) => f,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
             Err(e) => return Err(Error::input(&path, e.to_string())),
         };
         let corrupt = || Error::input(&path, "corrupt tile store (remove the run directory or use --force)");
-        let mut head = [0u8; 8];
+        let mut head = [0u8; CHUNK_HEADER];
         let mut z = Vec::new();
+        let mut f = std::io::BufReader::new(f);
+        let mut zd = zstd::bulk::Decompressor::new().map_err(|e| Error::input(&path, e.to_string()))?;
         loop {
             match f.read_exact(&mut head) {
                 Ok(()) => {}
@@ -177,10 +185,18 @@ impl Store {
                 Err(e) => return Err(Error::input(&path, e.to_string())),
             }
             let n = u32::from_le_bytes(head[..4].try_into().unwrap()) as usize;
-            let zl = u32::from_le_bytes(head[4..].try_into().unwrap()) as usize;
+            let zl = u32::from_le_bytes(head[4..8].try_into().unwrap()) as usize;
+            let v = |k: usize| f64::from_le_bytes(head[8 + 8 * k..16 + 8 * k].try_into().unwrap());
+            let chunk = Bounds { min: [v(0), v(1), v(2)], max: [v(3), v(4), v(5)] };
+            if let Some((b, d)) = near {
+                if (0..3).any(|a| chunk.min[a] > b.max[a] + d || chunk.max[a] < b.min[a] - d) {
+                    f.seek_relative(zl as i64).map_err(|_| corrupt())?;
+                    continue;
+                }
+            }
             z.resize(zl, 0);
             f.read_exact(&mut z).map_err(|_| corrupt())?;
-            let raw = zstd::bulk::decompress(&z, n * 32).map_err(|_| corrupt())?;
+            let raw = zd.decompress(&z, n * 32).map_err(|_| corrupt())?;
             if raw.len() != n * 32 {
                 return Err(corrupt());
             }
@@ -197,6 +213,34 @@ impl Store {
         Ok(())
     }
 }
+
+fn write_chunk(zc: &mut zstd::bulk::Compressor, f: &mut impl Write, path: &Path, xyz: &[DVec3], gid: &[u64]) -> Result<()> {
+    let n = xyz.len();
+    let bounds = Bounds::of(xyz.iter().copied());
+    let mut raw = Vec::with_capacity(n * 32);
+    for a in 0..3 {
+        for p in xyz {
+            raw.extend_from_slice(&p[a].to_le_bytes());
+        }
+    }
+    for g in gid {
+        raw.extend_from_slice(&g.to_le_bytes());
+    }
+    let z = zc.compress(&raw).map_err(io(path))?;
+    f.write_all(&(n as u32).to_le_bytes()).map_err(io(path))?;
+    f.write_all(&(z.len() as u32).to_le_bytes()).map_err(io(path))?;
+    for v in bounds.min.iter().chain(&bounds.max) {
+        f.write_all(&v.to_le_bytes()).map_err(io(path))?;
+    }
+    f.write_all(&z).map_err(io(path))?;
+    Ok(())
+}
+
+/// Bytes before each compressed chunk: point count, compressed length, bounding box.
+const CHUNK_HEADER: usize = 8 + 48;
+/// Buffered points of a tile are written in chunks by sub-cell, this many per tile edge, so
+/// that a neighbour's halo reads only the chunks along the border.
+const SUB_CELLS: f64 = 16.0;
 
 /// Buffers points per tile and appends them to the store when the buffers grow past a budget.
 pub struct Bucketer<'a> {
@@ -233,14 +277,20 @@ impl<'a> Bucketer<'a> {
 
     /// Writes every buffer out.
     pub fn flush(&mut self) -> Result<()> {
-        let mut tiles: Vec<u32> = self.buffers.keys().copied().collect();
-        tiles.sort_unstable();
-        for t in tiles {
-            let b = self.buffers.remove(&t).unwrap();
-            if !b.xyz.is_empty() {
-                self.store.append(t, &b)?;
-            }
-        }
+        use rayon::prelude::*;
+        let mut tiles: Vec<(u32, TilePoints)> = self.buffers.drain().collect();
+        tiles.sort_unstable_by_key(|t| t.0);
+        let sub = self.grid.size / SUB_CELLS;
+        let o = DVec3::from(self.grid.origin);
+        // Tiles are separate files: they are sorted, compressed and written in parallel.
+        tiles.into_par_iter().try_for_each(|(t, b)| {
+            let mut order: Vec<([i64; 3], u32)> = b.xyz.iter().enumerate().map(|(i, &p)| (((p - o) / sub).floor().as_i64vec3().to_array(), i as u32)).collect();
+            order.sort_unstable();
+            let sorted = TilePoints { xyz: order.iter().map(|r| b.xyz[r.1 as usize]).collect(), gid: order.iter().map(|r| b.gid[r.1 as usize]).collect() };
+            drop(b);
+            let runs: Vec<usize> = order.chunk_by(|a, b| a.0 == b.0).map(|r| r.len()).collect();
+            self.store.append_runs(t, &sorted, &runs)
+        })?;
         self.buffered = 0;
         Ok(())
     }
