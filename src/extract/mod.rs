@@ -333,11 +333,11 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
     // tile: it is kept once, in world coordinates with f32 normals, and only its local
     // positions are added.)
     let edge_pos: Vec<DVec3> = edges.iter().map(|e| e.p - origin).collect();
+    let normals: Vec<[glam::Vec3; 2]> = edges.iter().map(|e| e.n).collect();
+    drop(edges);
     let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: 2.0 * r.rmls_radius };
     let smoothed = smooth::smooth(&edge_pos, &grouped, &sp);
     seconds.smoothing = t.elapsed().as_secs_f64();
-    let normals: Vec<[glam::Vec3; 2]> = edges.iter().map(|e| e.n).collect();
-    drop(edges);
     // Diagnostics: with CREASE_DEBUG_DIR set, the edge cloud, its smoothed form, the corners
     // and the grown polylines are written there as OBJ files.
     if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
