@@ -186,7 +186,10 @@ fn stamp(path: &Path) -> Result<InputStamp> {
         .map_or(0, |d| d.as_nanos() as i128);
     let mut head = vec![0u8; 65536.min(meta.len() as usize)];
     std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut head)).map_err(|e| crate::error::io_input(path, e))?;
-    Ok(InputStamp { path: path.to_path_buf(), size: meta.len(), mtime_ns, header_hash: format!("{:016x}", fnv1a(&head)) })
+    // The path is made absolute (symbolic links kept) so that a resume from another working
+    // directory, or with the same file named relatively, is recognised as the same run.
+    let path = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    Ok(InputStamp { path, size: meta.len(), mtime_ns, header_hash: format!("{:016x}", fnv1a(&head)) })
 }
 
 /// Writes `bytes` to `path` atomically: temporary file, fsync, rename, fsync of the directory.

@@ -12,6 +12,7 @@
 //! inverse-distance Laplacian smoothing with ends and corners fixed.
 
 use glam::DVec3;
+use std::collections::HashMap;
 
 /// A curve being completed.
 #[derive(Clone, Debug, PartialEq)]
@@ -93,11 +94,52 @@ fn in_cone(x: DVec3, t: DVec3, q: DVec3, cos: f64, near: f64) -> bool {
     l <= near || d.dot(t) >= cos * l
 }
 
+/// A uniform hash grid over positions; a query visits every cell a ball touches, so the cost
+/// of a lookup does not grow with the number of curves (the edge cloud of a whole scan can
+/// grow thousands of them).
+struct Grid<T> {
+    cell: f64,
+    map: HashMap<[i64; 3], Vec<T>>,
+}
+
+impl<T: Copy> Grid<T> {
+    fn new(cell: f64) -> Grid<T> {
+        Grid { cell: cell.max(f64::MIN_POSITIVE), map: HashMap::new() }
+    }
+
+    fn key(&self, p: DVec3) -> [i64; 3] {
+        (p / self.cell).floor().to_array().map(|c| c as i64)
+    }
+
+    fn insert(&mut self, p: DVec3, t: T) {
+        self.map.entry(self.key(p)).or_default().push(t);
+    }
+
+    /// Calls `f` for every item in the cells that the ball of radius `r` around `p` touches
+    /// (a superset of the items within `r`; callers test the distance).
+    fn near(&self, p: DVec3, r: f64, mut f: impl FnMut(T)) {
+        let (lo, hi) = (self.key(p - DVec3::splat(r)), self.key(p + DVec3::splat(r)));
+        for x in lo[0]..=hi[0] {
+            for y in lo[1]..=hi[1] {
+                for z in lo[2]..=hi[2] {
+                    if let Some(items) = self.map.get(&[x, y, z]) {
+                        items.iter().for_each(|&t| f(t));
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Connects ends to the corners of the projection stage.
 fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
     let reach = p.reach * p.step;
     let cos = p.aperture_deg.to_radians().cos();
-    // Which corner each end would join.
+    let mut grid = Grid::new(reach);
+    for (k, &q) in corners.iter().enumerate() {
+        grid.insert(q, k);
+    }
+    // Which corner each end would join: the nearest in its cone (the lowest index on a tie).
     let mut claims: Vec<Vec<(usize, usize, f64)>> = vec![vec![]; corners.len()];
     for (ci, c) in curves.iter().enumerate() {
         if c.closed {
@@ -105,13 +147,15 @@ fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
         }
         for e in 0..2 {
             let (x, t, _) = c.end(e);
-            let best = corners
-                .iter()
-                .enumerate()
-                .filter(|(_, &k)| k.distance(x) <= reach && in_cone(x, t, k, cos, p.step))
-                .min_by(|a, b| a.1.distance(x).total_cmp(&b.1.distance(x)));
-            if let Some((k, &kp)) = best {
-                claims[k].push((ci, e, kp.distance(x)));
+            let mut best: Option<(f64, usize)> = None;
+            grid.near(x, reach, |k| {
+                let d = corners[k].distance(x);
+                if d <= reach && in_cone(x, t, corners[k], cos, p.step) && best.map_or(true, |b| (d, k) < b) {
+                    best = Some((d, k));
+                }
+            });
+            if let Some((d, k)) = best {
+                claims[k].push((ci, e, d));
             }
         }
     }
@@ -132,49 +176,98 @@ fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
     }
 }
 
+/// The vertices of all curves in a grid. A curve that changes gets a new version and its
+/// vertices are added again; entries of older versions are skipped.
+struct Vertices {
+    grid: Grid<(u32, u32, u32)>,
+    version: Vec<u32>,
+}
 
+impl Vertices {
+    fn new(curves: &[Curve], cell: f64) -> Vertices {
+        let mut v = Vertices { grid: Grid::new(cell), version: vec![] };
+        for ci in 0..curves.len() {
+            v.update(curves, ci);
+        }
+        v
+    }
+
+    /// Re-indexes curve `ci` after a change (or indexes it if new).
+    fn update(&mut self, curves: &[Curve], ci: usize) {
+        if ci >= self.version.len() {
+            self.version.resize(ci + 1, 0);
+        }
+        self.version[ci] += 1;
+        let ver = self.version[ci];
+        for (vi, &q) in curves[ci].v.iter().enumerate() {
+            self.grid.insert(q, (ci as u32, ver, vi as u32));
+        }
+    }
+}
+
+/// Gives every free end its action (see the module notes), in passes over the curves until a
+/// pass changes nothing. An end that acted is looked at again at once (after a join it is a
+/// different end); every action removes at least one free end, so the passes end.
 fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams) {
     let reach = p.reach * p.step;
     let cos = p.aperture_deg.to_radians().cos();
-    // Repeat until no end changes: every action removes at least one free end.
-    'outer: loop {
-        for ci in 0..curves.len() {
-            if curves[ci].closed {
-                continue;
-            }
+    let mut index = Vertices::new(curves, reach);
+    loop {
+        let mut changed = false;
+        let mut ci = 0;
+        while ci < curves.len() {
+            let mut again = false;
             for e in 0..2 {
+                // (Curves joined into another are left empty until the end.)
+                if curves[ci].closed || curves[ci].v.len() < 2 {
+                    break;
+                }
                 let (x, t, attached) = curves[ci].end(e);
                 if attached || t == DVec3::ZERO {
                     continue;
                 }
                 let own_end = if e == 0 { 0 } else { curves[ci].v.len() - 1 };
-                // Nearest vertex ahead, of any curve; on its own curve only the other end.
+                // Nearest vertex ahead, of any curve (the lowest curve, then vertex, on a tie);
+                // on its own curve only the other end.
                 let mut best: Option<(f64, usize, usize)> = None;
-                for (cj, c) in curves.iter().enumerate() {
-                    for (vi, &q) in c.v.iter().enumerate() {
-                        if cj == ci {
-                            let other = c.v.len() - 1 - own_end;
-                            if vi != other || c.v.len() < 4 {
-                                continue;
-                            }
-                        }
-                        let d = q.distance(x);
-                        if d > reach || d == 0.0 || !in_cone(x, t, q, cos, p.step) {
-                            continue;
-                        }
-                        if best.as_ref().map_or(true, |b| d < b.0) {
-                            best = Some((d, cj, vi));
-                        }
+                index.grid.near(x, reach, |(cj, ver, vi)| {
+                    let (cj, vi) = (cj as usize, vi as usize);
+                    if ver != index.version[cj] {
+                        return;
                     }
-                }
+                    let c = &curves[cj];
+                    if cj == ci && (vi != c.v.len() - 1 - own_end || c.v.len() < 4) {
+                        return;
+                    }
+                    let q = c.v[vi];
+                    let d = q.distance(x);
+                    if d > reach || d == 0.0 || !in_cone(x, t, q, cos, p.step) {
+                        return;
+                    }
+                    if best.map_or(true, |b| (d, cj, vi) < b) {
+                        best = Some((d, cj, vi));
+                    }
+                });
                 let Some((_, cj, vi)) = best else { continue };
+                let before = curves.len();
                 if act(curves, ci, e, cj, vi, cos, reach) {
-                    continue 'outer;
+                    for k in [ci, cj].into_iter().chain(before..curves.len()) {
+                        index.update(curves, k);
+                    }
+                    changed = true;
+                    again = true;
+                    break;
                 }
             }
+            if !again {
+                ci += 1;
+            }
         }
-        break;
+        if !changed {
+            break;
+        }
     }
+    curves.retain(|c| !c.v.is_empty());
 }
 
 /// Connects end `e` of curve `ci` to vertex `vi` of curve `cj`. Returns true if curves changed.
@@ -263,7 +356,9 @@ fn join(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, f: usize) {
     a.v.extend(b.v);
     a.corner.extend(b.corner);
     curves[ci] = a;
-    curves.remove(cj);
+    // (Left empty, not removed, so that the other curves keep their places while ends are
+    // being resolved.)
+    curves[cj] = Curve::new(vec![], false);
 }
 
 /// Midpoint of the closest points of lines x + s t and y + r u, if they are not parallel.

@@ -11,6 +11,7 @@
 use super::fit::Pca;
 use crate::spatial::Index;
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Growing parameters.
 #[derive(Clone, Copy, Debug)]
@@ -38,12 +39,12 @@ pub fn grow(points: &[DVec3], p: &GrowParams) -> Vec<Grown> {
     }
     let f32s: Vec<[f32; 3]> = points.iter().map(|q| q.as_vec3().to_array()).collect();
     let index = Index::new(&f32s);
-    let mut nn = Vec::new();
     // Seed order by linearity of the step-radius neighbourhood.
     let lin: Vec<f64> = (0..n)
-        .map(|i| {
+        .into_par_iter()
+        .map_init(Vec::new, |nn, i| {
             nn.clear();
-            index.within(&f32s[i], p.step as f32, &mut nn);
+            index.within(&f32s[i], p.step as f32, nn);
             if nn.len() < 3 {
                 return 0.0;
             }
@@ -53,6 +54,7 @@ pub fn grow(points: &[DVec3], p: &GrowParams) -> Vec<Grown> {
     let mut order: Vec<usize> = (0..n).filter(|&i| lin[i] > 0.0).collect();
     order.sort_by(|&a, &b| lin[b].total_cmp(&lin[a]).then(a.cmp(&b)));
     let mut consumed = vec![false; n];
+    let mut nn = Vec::new();
     let mut out = vec![];
     for &s in &order {
         if consumed[s] {

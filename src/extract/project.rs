@@ -287,15 +287,29 @@ fn refine(surfs: &mut [Surface], pts: &[DVec3], min_threshold: f64) {
 /// to the group's weighted mean (Daniels 2007). Groups with fewer than `min_support` members are
 /// dropped as accidental.
 pub fn group_corners(corners: &[CornerPoint], radius: f64, min_support: usize) -> Vec<DVec3> {
+    if corners.is_empty() {
+        return vec![];
+    }
     let mut order: Vec<usize> = (0..corners.len()).collect();
     order.sort_by(|&a, &b| corners[b].w.total_cmp(&corners[a].w).then(a.cmp(&b)));
+    let mut rank = vec![0; corners.len()];
+    for (r, &a) in order.iter().enumerate() {
+        rank[a] = r;
+    }
+    let f32s: Vec<[f32; 3]> = corners.iter().map(|c| c.p.as_vec3().to_array()).collect();
+    let index = crate::spatial::Index::new(&f32s);
+    let mut nn = Vec::new();
     let mut taken = vec![false; corners.len()];
     let mut out = vec![];
     for &a in &order {
         if taken[a] {
             continue;
         }
-        let group: Vec<usize> = order.iter().copied().filter(|&b| !taken[b] && corners[b].p.distance(corners[a].p) <= radius).collect();
+        // (The f32 query is widened a little; membership is decided in f64.)
+        nn.clear();
+        index.within(&f32s[a], (radius * 1.001) as f32 + 1e-6, &mut nn);
+        let mut group: Vec<usize> = nn.iter().map(|&(b, _)| b as usize).filter(|&b| !taken[b] && corners[b].p.distance(corners[a].p) <= radius).collect();
+        group.sort_unstable_by_key(|&b| rank[b]);
         for &b in &group {
             taken[b] = true;
         }
