@@ -1,7 +1,8 @@
 //! Small, allocation-free fits: weighted PCA (planes, lines) and bivariate quadratics over a
 //! plane, plus the implicit form of a fitted surface for Newton projection.
 
-use glam::DVec3;
+use glam::{DMat3, DVec3};
+use glamx::DSymmetricEigen3;
 use nalgebra::{Matrix3, Matrix6, Vector6};
 
 /// Principal components of a weighted point set: eigenvalues in decreasing order with their
@@ -38,19 +39,29 @@ impl Pca {
             c[4] += w * d.y * d.z;
             c[5] += w * d.z * d.z;
         }
-        let m = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]) / sw;
-        let e = m.symmetric_eigen();
-        let mut idx = [0usize, 1, 2];
-        idx.sort_by(|&a, &b| e.eigenvalues[b].total_cmp(&e.eigenvalues[a]));
-        let vec = |i: usize| {
-            let c = e.eigenvectors.column(i);
-            DVec3::new(c[0], c[1], c[2]).normalize_or_zero()
-        };
-        Some(Pca {
+        Some(Pca::from_covariance(mean, c.map(|x| x / sw)))
+    }
+
+    /// PCA from a mean and the covariance's upper triangle (xx, xy, xz, yy, yz, zz).
+    ///
+    /// Closed-form eigen decomposition (glamx, after Eberly's robust 3x3 solver) on the
+    /// covariance scaled to unit trace, so that its tolerances do not depend on the data's
+    /// units; values are scaled back.
+    pub fn from_covariance(mean: DVec3, c: [f64; 6]) -> Pca {
+        let trace = c[0] + c[3] + c[5];
+        if !(trace > 0.0) || !trace.is_finite() {
+            return Pca { mean, values: [0.0; 3], vectors: [DVec3::X, DVec3::Y, DVec3::Z] };
+        }
+        let c = c.map(|x| x / trace);
+        let m = DMat3::from_cols_array(&[c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]]);
+        // Ascending eigenvalues; columns are the matching unit eigenvectors.
+        let e = DSymmetricEigen3::new(m);
+        let vec = |v: DVec3| v.normalize_or(DVec3::X);
+        Pca {
             mean,
-            values: idx.map(|i| e.eigenvalues[i].max(0.0)),
-            vectors: idx.map(vec),
-        })
+            values: [e.eigenvalues.z, e.eigenvalues.y, e.eigenvalues.x].map(|l| l.max(0.0) * trace),
+            vectors: [vec(e.eigenvectors.z_axis), vec(e.eigenvectors.y_axis), vec(e.eigenvectors.x_axis)],
+        }
     }
 
     /// Normal of the best-fitting plane (smallest component).
@@ -238,6 +249,33 @@ mod tests {
         let p = Pca::of(pts.iter().copied()).unwrap();
         assert!((p.axis().dot(DVec3::new(1.0, 2.0, 0.0).normalize()).abs() - 1.0).abs() < 1e-9);
         assert!(p.linearity() > 0.999);
+    }
+
+    #[test]
+    fn pca_is_an_eigen_decomposition_at_any_scale_and_shape() {
+        // Planes, lines and blobs, at scales from micrometres to kilometres.
+        let mut rng = crate::synth::rng::Rng::stream(7, 0);
+        for case in 0..600 {
+            let scale = 10f64.powi(case % 10 - 6);
+            let spread = [DVec3::new(1.0, 1.0, 0.01), DVec3::new(1.0, 0.01, 0.01), DVec3::ONE, DVec3::new(1.0, 1.0, 1e-6)][case as usize % 4];
+            let axes = Frame::new(DVec3::ZERO, DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5).normalize());
+            let pts: Vec<(DVec3, f64)> = (0..40)
+                .map(|_| {
+                    let l = DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * spread * scale;
+                    (axes.u * l.x + axes.v * l.y + axes.n * l.z + DVec3::splat(3.0 * scale), 1.0)
+                })
+                .collect();
+            let p = Pca::of(pts.iter().copied()).unwrap();
+            let cov = |v: DVec3| pts.iter().map(|&(q, _)| (q - p.mean) * (q - p.mean).dot(v)).sum::<DVec3>() / pts.len() as f64;
+            let total: f64 = p.values.iter().sum();
+            assert!(p.values[0] >= p.values[1] && p.values[1] >= p.values[2], "{:?}", p.values);
+            for k in 0..3 {
+                let v = p.vectors[k];
+                assert!((v.length() - 1.0).abs() < 1e-9);
+                assert!((cov(v) - v * p.values[k]).length() <= 1e-9 * total, "case {case}: component {k}");
+                assert!(v.dot(p.vectors[(k + 1) % 3]).abs() < 1e-6, "case {case}: not orthogonal");
+            }
+        }
     }
 
     #[test]
