@@ -19,7 +19,9 @@ fi
 ls -l "$las"
 run() { # name, then the command prefix
   local name=$1; shift
-  /usr/bin/time -v "$@" "$bin" extract "$las" -o "$work/$name" --memory 1G --force 2> "$work/$name.time" || { tail -5 "$work/$name.time"; return 1; }
+  # (A fresh directory: the same job in an existing one would resume, not be timed.)
+  rm -rf "${work:?}/$name"
+  /usr/bin/time -v "$@" "$bin" extract "$las" -o "$work/$name" --memory 1G 2> "$work/$name.time" || { tail -5 "$work/$name.time"; return 1; }
   grep -E "Elapsed|Maximum resident" "$work/$name.time"
   python3 - "$work/$name/report.json" <<'PY'
 import json, sys

@@ -14,6 +14,7 @@ echo "| cloud | noise | curves (truth) | recall | precision | mean dB | max dB |
 echo "|---|---|---|---|---|---|---|---|"
 row() { # name noise cloud truth
   local name=$1 noise=$2 cloud=$3 truth=$4 out=$work/out_${1}_$2
+  rm -rf "$out"  # (fresh: the same job in an old directory would resume)
   "$bin" extract "$cloud" -o "$out" -q
   "$bin" eval --truth "$truth" --curves "$out/curves.obj" --json > "$out/eval.json"
   python3 - "$name" "$noise" "$out/eval.json" "$out/report.json" <<'PY'

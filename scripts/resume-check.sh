@@ -13,7 +13,8 @@ las=$work/scene_$n.las
 [ -f "$las" ] || "$bin" synth scene -n "$n" -o "$las" 2>/dev/null
 args=(extract "$las" --memory 256M -q)
 start=$(date +%s.%N)
-"$bin" "${args[@]}" -o "$work/clean" --force
+rm -rf "$work/clean"  # (fresh: the same job in an old directory would resume)
+"$bin" "${args[@]}" -o "$work/clean"
 full=$(echo "$(date +%s.%N) - $start" | bc)
 echo "uninterrupted run: $full s"
 rm -rf "$work/killed"

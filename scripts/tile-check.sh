@@ -14,7 +14,8 @@ las=$work/scene_$n.las
 side=$(python3 -c "import json,subprocess;i=json.loads(subprocess.check_output(['$bin','info','--json','$las']))[0]['bounds'];print(max(i['max'][0]-i['min'][0], i['max'][1]-i['min'][1]))")
 for k in 1 2 4 8; do
   size=$(python3 -c "print($side / $k * 1.0001 if $k > 1 else $side * 2)")
-  "$bin" extract "$las" -o "$work/t$k" --tile-size "$size" -q --force
+  rm -rf "$work/t$k"  # (fresh: the same job in an old directory would resume)
+  "$bin" extract "$las" -o "$work/t$k" --tile-size "$size" -q
 done
 python3 - "$work" <<'PY'
 import json, math, sys
