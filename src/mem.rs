@@ -25,3 +25,15 @@ fn status_kib(key: &str) -> u64 {
         .and_then(|s| s.lines().find(|l| l.starts_with(key)).and_then(|l| l.split_whitespace().nth(1)?.parse().ok()))
         .unwrap_or(0)
 }
+
+/// Hands memory freed by finished work back to the operating system where the allocator would
+/// keep it (glibc keeps the freed blocks of every thread's arena mapped). Called between the
+/// tile passes and the curve stage, so that the memory the tile passes used is not counted a
+/// second time, under a memory limit, on top of the curve stage's.
+pub fn release_free_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only releases free pages of the allocator's own heaps.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}

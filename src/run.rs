@@ -489,6 +489,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
 
     // Curves from the whole edge cloud.
     let t = Instant::now();
+    crate::mem::release_free_memory();
     // The edge cloud is gathered into vectors sized from the results' headers, so it is never
     // held more than once during the gathering.
     let (mut ne, mut nc) = (0usize, 0usize);

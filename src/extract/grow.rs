@@ -37,14 +37,14 @@ pub fn grow(points: &[DVec3], p: &GrowParams) -> Vec<Grown> {
     if n < 2 {
         return vec![];
     }
-    let f32s: Vec<[f32; 3]> = points.iter().map(|q| q.as_vec3().to_array()).collect();
-    let index = Index::new(&f32s);
+    // (The f32 copy is only the tree's input: the edge cloud grows with the whole scan.)
+    let index = Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>());
     // Seed order by linearity of the step-radius neighbourhood.
     let lin: Vec<f64> = (0..n)
         .into_par_iter()
         .map_init(Vec::new, |nn, i| {
             nn.clear();
-            index.within(&f32s[i], p.step as f32, nn);
+            index.within(&points[i].as_vec3().to_array(), p.step as f32, nn);
             if nn.len() < 3 {
                 return 0.0;
             }
@@ -62,7 +62,7 @@ pub fn grow(points: &[DVec3], p: &GrowParams) -> Vec<Grown> {
         }
         let x = points[s];
         nn.clear();
-        index.within(&f32s[s], p.step as f32, &mut nn);
+        index.within(&points[s].as_vec3().to_array(), p.step as f32, &mut nn);
         let Some(pca) = Pca::of(nn.iter().map(|&(j, _)| (points[j as usize], 1.0))) else { continue };
         let start = pca.mean + pca.axis() * (x - pca.mean).dot(pca.axis());
         let (fwd, closed) = trace(points, &index, &mut consumed, start, pca.axis(), p);

@@ -291,7 +291,7 @@ pub fn project_core(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> (Vec<Wor
     // spacing), not by its id, so the same point gets the same stream in any file layout.
     let q = r.kappa / 4096.0;
     let ids: Vec<u64> = candidates.iter().map(|&i| position_key(cloud.at(i as usize) + cloud.origin, q)).collect();
-    let pp = project::ProjectParams { radius: r.rmls_radius, min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed };
+    let pp = project::ProjectParams { radius: r.rmls_radius, min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed, noise: r.noise };
     let projected = project::project(cloud, candidates, &ids, &pp);
     let one = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
     let o = cloud.origin;
@@ -332,9 +332,10 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
     // (The edge cloud is the one part of a run that grows with the whole input, not with a
     // tile: it is kept once, in world coordinates with f32 normals, and only its local
     // positions are added.)
-    let edge_pos: Vec<DVec3> = edges.iter().map(|e| e.p - origin).collect();
+    // (Normals are copied out first; the positions then reuse the records' allocation, as
+    // collecting a consumed vector into smaller items of the same alignment does in place.)
     let normals: Vec<[glam::Vec3; 2]> = edges.iter().map(|e| e.n).collect();
-    drop(edges);
+    let edge_pos: Vec<DVec3> = edges.into_iter().map(|e| e.p - origin).collect();
     let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: 2.0 * r.rmls_radius };
     let smoothed = smooth::smooth(&edge_pos, &grouped, &sp);
     seconds.smoothing = t.elapsed().as_secs_f64();

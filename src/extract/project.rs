@@ -46,6 +46,9 @@ pub struct ProjectParams {
     pub min_angle_deg: f64,
     /// Seed for the deterministic per-candidate random streams.
     pub seed: u64,
+    /// Measured noise (standard deviation about the local plane): a seed plane whose
+    /// quantile residual is already at this floor ends the search for better seeds.
+    pub noise: f64,
 }
 
 /// What projection made of one candidate.
@@ -117,7 +120,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     s.remaining.extend(0..n);
     let mut surfaces: Vec<Surface> = Vec::new();
     while s.remaining.len() >= min_count && surfaces.len() < MAX_SURFACES {
-        let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count) else { break };
+        let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count, 0.674 * p.noise) else { break };
         // A "new" surface (nearly) parallel to one already found is the same surface's
         // leftovers. (How sharp a crease is can only be told once its edge is known: see
         // `crease_angle`.)
@@ -174,7 +177,7 @@ fn crease_angle(e: DVec3, a: &Quadric, b: &Quadric) -> f64 {
 }
 
 /// Finds the best-supported surface among the remaining points and removes its inliers.
-fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: usize) -> Option<Surface> {
+fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: usize, floor: f64) -> Option<Surface> {
     let m = s.remaining.len();
     // Least quantile of squares over seed patches: the quantile is low enough that a surface
     // holding a quarter of the points can win.
@@ -194,6 +197,12 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
         let qv = *s.res.select_nth_unstable_by(q - 1, |a, b| a.total_cmp(b)).1;
         if best.as_ref().map_or(true, |b| qv < b.0) {
             best = Some((qv, frame));
+        }
+        // A seed plane already at the noise floor cannot be beaten by more than noise: stop.
+        // (Searching on for the lowest quantile then mostly picks planes that fit a subset too
+        // tightly; stopping was measured both faster and at least as accurate.)
+        if qv <= floor {
+            break;
         }
     }
     let (qv, mut frame) = best?;

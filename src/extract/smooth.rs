@@ -29,21 +29,22 @@ pub fn smooth(points: &[DVec3], corners: &[DVec3], p: &SmoothParams) -> Vec<DVec
     if points.len() < MIN_K {
         return points.to_vec();
     }
-    let f32s: Vec<[f32; 3]> = points.iter().map(|q| q.as_vec3().to_array()).collect();
-    let index = Index::new(&f32s);
+    // (The f32 copy is only the tree's input: the edge cloud grows with the whole scan.)
+    let index = Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>());
     let corner_index = (!corners.is_empty()).then(|| Index::new(&corners.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
     (0..points.len())
         .into_par_iter()
         .map_init(Vec::new, |nn, i| {
             let x = points[i];
+            let xf = x.as_vec3().to_array();
             let cap = corner_index.as_ref().map_or(f64::INFINITY, |ci| {
                 let mut c = Vec::new();
-                ci.nearest_n(&f32s[i], 1, &mut c);
+                ci.nearest_n(&xf, 1, &mut c);
                 corners[c[0].0 as usize].distance(x)
             });
             let radius = p.max_radius.min(cap);
             nn.clear();
-            index.nearest_n(&f32s[i], MAX_K.min(points.len()), nn);
+            index.nearest_n(&xf, MAX_K.min(points.len()), nn);
             let mut k = MIN_K;
             let mut best: Option<Pca> = None;
             while k <= nn.len() {
