@@ -38,15 +38,10 @@ impl Pca {
             c[4] += w * d.y * d.z;
             c[5] += w * d.z * d.z;
         }
-        Some(Pca::from_covariance(mean, c.map(|x| x / sw)))
-    }
-
-    /// PCA from a mean and the covariance's upper triangle (xx, xy, xz, yy, yz, zz).
-    ///
-    /// (A closed-form solver, glamx's, was tried: about 10% faster overall, but with it the
-    /// curves depended on how a cloud was split into files, even with canonical eigenvector
-    /// signs, and its fallback axis broke exactly collinear points.)
-    pub fn from_covariance(mean: DVec3, c: [f64; 6]) -> Pca {
+        // (nalgebra's iterative solver. glamx's closed form was tried: about 10% faster overall,
+        // but with it the curves depended on how a cloud was split into files, even with
+        // canonical eigenvector signs, and its fallback axis broke exactly collinear points.)
+        let c = c.map(|x| x / sw);
         let e = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]).symmetric_eigen();
         let mut idx = [0usize, 1, 2];
         idx.sort_by(|&a, &b| e.eigenvalues[b].total_cmp(&e.eigenvalues[a]));
@@ -58,7 +53,7 @@ impl Pca {
         let a = e.eigenvalues[idx[0]].max(0.0);
         let b = e.eigenvalues[idx[1]].clamp(0.0, a);
         let c = e.eigenvalues[idx[2]].clamp(0.0, b);
-        Pca { mean, values: [a, b, c], vectors: idx.map(vec) }
+        Some(Pca { mean, values: [a, b, c], vectors: idx.map(vec) })
     }
 
     /// Normal of the best-fitting plane (smallest component).

@@ -330,10 +330,9 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
     let grouped = project::group_corners(&local_corners, r.corner_radius, 3);
     counts.corners = grouped.len() as u64;
     // (The edge cloud is the one part of a run that grows with the whole input, not with a
-    // tile: it is kept once, in world coordinates with f32 normals, and only its local
-    // positions are added.)
-    // (Normals are copied out first; the positions then reuse the records' allocation, as
-    // collecting a consumed vector into smaller items of the same alignment does in place.)
+    // tile, so it is held once: normals are copied out first, then the positions reuse the
+    // records' allocation, as collecting a consumed vector into smaller items of the same
+    // alignment does in place.)
     let normals: Vec<[glam::Vec3; 2]> = edges.iter().map(|e| e.n).collect();
     let edge_pos: Vec<DVec3> = edges.into_iter().map(|e| e.p - origin).collect();
     let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: 2.0 * r.rmls_radius };
