@@ -114,6 +114,9 @@ pub struct Report {
     pub total_seconds: f64,
     /// Peak resident memory of this invocation, bytes.
     pub peak_rss_bytes: u64,
+    /// Peak resident memory of this invocation up to the end of the tile passes, bytes (the
+    /// difference to `peak_rss_bytes` is what the curve stages added).
+    pub peak_rss_tiles_bytes: u64,
     /// Worker threads.
     pub threads: usize,
     /// Tiles in the grid.
@@ -487,29 +490,71 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     pass.projection_load = time.load;
     pass.projection = t.elapsed().as_secs_f64();
 
-    // Curves from the whole edge cloud.
+    // Curve stages. Stage 3 (smoothing) is local: each tile's edge points are smoothed with
+    // the edge points of the neighbouring tiles within the smoothing reach as context, so
+    // only a few tiles' edge points are held at a time. Stages 4-5 run on the whole smoothed
+    // edge cloud (positions and normals, 48 bytes a point).
     let t = Instant::now();
+    let peak_rss_tiles = crate::mem::peak_rss();
     crate::mem::release_free_memory();
-    // The edge cloud is gathered into vectors sized from the results' headers, so it is never
-    // held more than once during the gathering.
-    let (mut ne, mut nc) = (0usize, 0usize);
-    for &t in &tiles {
-        let (e, c) = edge_counts(&edir, t)?;
-        ne += e;
-        nc += c;
-    }
-    let mut edges = Vec::with_capacity(ne);
-    let mut corners = Vec::with_capacity(nc);
+    let q = extract::snap_quantum(r.kappa);
+    let load_edges = |t: u32| -> Result<Decoded> {
+        let (mut e, c, n, one) = decode_edges(&read_result(&edir, t)?, &result_path(&edir, t))?;
+        for x in e.iter_mut() {
+            extract::snap_edge(x, q);
+        }
+        Ok((e, c, n, one))
+    };
+    // Bounds of each tile's edge points, and all corner points.
     let mut counts = Counts { points: count, ..Default::default() };
+    let mut boxes: Vec<(u32, DVec3, DVec3)> = vec![];
+    let mut corners = vec![];
     for &t in &tiles {
-        let (e, c, n, one) = decode_edges(&read_result(&edir, t)?, &edir.join(format!("{t}.bin")))?;
-        edges.extend(e);
-        corners.extend(c);
+        let (e, c, n, one) = load_edges(t)?;
         counts.candidates += n;
         counts.one_surface += one;
+        counts.edge_points += e.len() as u64;
+        counts.corner_points += c.len() as u64;
+        corners.extend(c);
+        if let Some(lo) = e.iter().map(|x| x.p).reduce(DVec3::min) {
+            boxes.push((t, lo, e.iter().map(|x| x.p).reduce(DVec3::max).unwrap()));
+        }
     }
-    let mut seconds = Timings { candidates: pass.residuals, projection: pass.projection, index: pass.statistics, ..Default::default() };
-    let curves = extract::curves_from_edges(edges, corners, &r, &mut counts, &mut seconds);
+    let origin = boxes.iter().map(|b| b.1).reduce(DVec3::min).unwrap_or(DVec3::ZERO);
+    let grouped = extract::group_corners(corners, origin, &r);
+    counts.corners = grouped.len() as u64;
+    // (The margin covers the f32 rounding of the k-d tree's distances.)
+    let reach = extract::smoothing_reach(&r) * 1.001 + 4.0 * q;
+    let debug = std::env::var("CREASE_DEBUG_DIR").ok();
+    let mut debug_edges = vec![];
+    let mut points = Vec::with_capacity(counts.edge_points as usize);
+    let mut normals = Vec::with_capacity(counts.edge_points as usize);
+    let bar = progress.bar("smoothing", boxes.len() as u64, "tiles");
+    for &(t, lo, hi) in &boxes {
+        let (lo, hi) = (lo - DVec3::splat(reach), hi + DVec3::splat(reach));
+        let inside = |p: DVec3| p.cmpge(lo).all() && p.cmple(hi).all();
+        let (own, _, _, _) = load_edges(t)?;
+        let mut block: Vec<DVec3> = own.iter().map(|e| e.p - origin).collect();
+        for &(u, ulo, uhi) in &boxes {
+            if u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all() {
+                block.extend(load_edges(u)?.0.iter().filter(|e| inside(e.p)).map(|e| e.p - origin));
+            }
+        }
+        if debug.is_some() {
+            debug_edges.extend_from_slice(&block[..own.len()]);
+        }
+        points.extend(extract::smooth_block(&block, own.len(), &grouped, &r));
+        normals.extend(own.iter().map(|e| e.n));
+        bar.inc(1);
+        check_stop()?;
+    }
+    bar.finish();
+    if let Some(d) = &debug {
+        extract::debug_dump(d, "edges.obj", &debug_edges, origin);
+    }
+    drop(debug_edges);
+    let mut seconds = Timings { candidates: pass.residuals, projection: pass.projection, index: pass.statistics, smoothing: t.elapsed().as_secs_f64(), ..Default::default() };
+    let curves = extract::curves_from_smoothed(points, normals, &grouped, origin, &r, &mut counts, &mut seconds);
     pass.curves = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -527,6 +572,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         pass_seconds: pass,
         total_seconds: t0.elapsed().as_secs_f64(),
         peak_rss_bytes: crate::mem::peak_rss(),
+        peak_rss_tiles_bytes: peak_rss_tiles,
         threads: rayon::current_num_threads(),
         tiles: grid.len(),
         tile_size: grid.size,
@@ -679,17 +725,6 @@ fn encode_edges(edges: &[WorldEdge], corners: &[WorldCorner], candidates: u64, o
         out.extend_from_slice(&c.w.to_le_bytes());
     }
     out
-}
-
-/// Edge and corner counts of a projection result, from its header alone.
-fn edge_counts(dir: &Path, t: u32) -> Result<(usize, usize)> {
-    let p = result_path(dir, t);
-    let f = std::fs::File::open(&p).map_err(|e| Error::input(&p, e.to_string()))?;
-    let mut head = [0u8; 16];
-    let mut z = zstd::Decoder::new(f).map_err(|e| Error::input(&p, e.to_string()))?;
-    std::io::Read::read_exact(&mut z, &mut head).map_err(|e| Error::input(&p, format!("corrupt tile result: {e}")))?;
-    let u = |o: usize| u64::from_le_bytes(head[o..o + 8].try_into().unwrap()) as usize;
-    Ok((u(0), u(8)))
 }
 
 type Decoded = (Vec<WorldEdge>, Vec<WorldCorner>, u64, u64);

@@ -31,14 +31,12 @@ pub struct Grown {
     pub closed: bool,
 }
 
-/// Grows polylines through `points`.
-pub fn grow(points: &[DVec3], p: &GrowParams) -> Vec<Grown> {
+/// Grows polylines through `points`, whose k-d tree is `index`.
+pub fn grow(points: &[DVec3], index: &Index, p: &GrowParams) -> Vec<Grown> {
     let n = points.len();
     if n < 2 {
         return vec![];
     }
-    // (The f32 copy is only the tree's input: the edge cloud grows with the whole scan.)
-    let index = Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>());
     // Seed order by linearity of the step-radius neighbourhood.
     let lin: Vec<f64> = (0..n)
         .into_par_iter()
@@ -51,12 +49,14 @@ pub fn grow(points: &[DVec3], p: &GrowParams) -> Vec<Grown> {
             Pca::of(nn.iter().map(|&(j, _)| (points[j as usize], 1.0))).map_or(0.0, |c| c.linearity())
         })
         .collect();
-    let mut order: Vec<usize> = (0..n).filter(|&i| lin[i] > 0.0).collect();
-    order.sort_by(|&a, &b| lin[b].total_cmp(&lin[a]).then(a.cmp(&b)));
+    let mut order: Vec<u32> = (0..n as u32).filter(|&i| lin[i as usize] > 0.0).collect();
+    order.sort_unstable_by(|&a, &b| lin[b as usize].total_cmp(&lin[a as usize]).then(a.cmp(&b)));
+    drop(lin);
     let mut consumed = vec![false; n];
     let mut nn = Vec::new();
     let mut out = vec![];
     for &s in &order {
+        let s = s as usize;
         if consumed[s] {
             continue;
         }
@@ -65,9 +65,9 @@ pub fn grow(points: &[DVec3], p: &GrowParams) -> Vec<Grown> {
         index.within(&points[s].as_vec3().to_array(), p.step as f32, &mut nn);
         let Some(pca) = Pca::of(nn.iter().map(|&(j, _)| (points[j as usize], 1.0))) else { continue };
         let start = pca.mean + pca.axis() * (x - pca.mean).dot(pca.axis());
-        let (fwd, closed) = trace(points, &index, &mut consumed, start, pca.axis(), p);
-        let bwd = if closed { vec![] } else { trace(points, &index, &mut consumed, start, -pca.axis(), p).0 };
-        consume(&index, &mut consumed, start, p.step);
+        let (fwd, closed) = trace(points, index, &mut consumed, start, pca.axis(), p);
+        let bwd = if closed { vec![] } else { trace(points, index, &mut consumed, start, -pca.axis(), p).0 };
+        consume(index, &mut consumed, start, p.step);
         let mut line: Vec<DVec3> = bwd.into_iter().rev().collect();
         line.push(start);
         line.extend(fwd);

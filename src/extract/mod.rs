@@ -300,58 +300,90 @@ pub fn project_core(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> (Vec<Wor
     (edges, corners, one)
 }
 
-/// Stages 3 to 5 on the whole edge cloud: corner grouping, smoothing, growing, completion.
-/// Edge points are sorted first so the result does not depend on the order they arrive in.
-pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner>, r: &Resolved, counts: &mut Counts, seconds: &mut Timings) -> Vec<Polyline> {
-    // Snap to a grid far finer than the spacing: positions computed in differently placed
-    // tiles differ in their last bits, and the curve stages are discrete (seed order, cone
-    // tests); snapping makes their input, and so the curves, the same for any tiling.
-    let q = r.kappa / 4096.0;
+/// The grid the curve stages snap positions to, far finer than the spacing: positions
+/// computed in differently placed tiles differ in their last bits, and the curve stages are
+/// discrete (seed order, cone tests); snapping makes their input, and so the curves, the same
+/// for any tiling.
+pub fn snap_quantum(kappa: f64) -> f64 {
+    kappa / 4096.0
+}
+
+/// `p` on the snapping grid of quantum `q`.
+pub fn snap(p: DVec3, q: f64) -> DVec3 {
     // (+ 0.0 turns a negative zero, whose sign is rounding noise, into zero.)
-    let snap = |p: DVec3| (p / q).round() * q + DVec3::ZERO;
-    let snap_n = |n: glam::Vec3| (n * 1e6).round() / 1e6 + glam::Vec3::ZERO;
-    for e in edges.iter_mut() {
-        e.p = snap(e.p);
-        e.n = e.n.map(snap_n);
-    }
+    (p / q).round() * q + DVec3::ZERO
+}
+
+/// Snaps an edge point's position to quantum `q` and its normals to a millionth.
+pub fn snap_edge(e: &mut WorldEdge, q: f64) {
+    e.p = snap(e.p, q);
+    e.n = e.n.map(|n| (n * 1e6).round() / 1e6 + glam::Vec3::ZERO);
+}
+
+/// Sorting key of a position: its bits (positions are snapped, so equal means identical).
+fn pos_key(p: DVec3) -> [u64; 3] {
+    p.to_array().map(f64::to_bits)
+}
+
+fn normal_key(n: &[glam::Vec3; 2]) -> [[u32; 3]; 2] {
+    [n[0].to_array(), n[1].to_array()].map(|v| v.map(f32::to_bits))
+}
+
+/// Corner grouping over all corner points of the cloud, in any order; the grouped corners are
+/// returned relative to `origin`.
+pub fn group_corners(mut corners: Vec<WorldCorner>, origin: DVec3, r: &Resolved) -> Vec<DVec3> {
+    let q = snap_quantum(r.kappa);
     for c in corners.iter_mut() {
-        c.p = snap(c.p);
+        c.p = snap(c.p, q);
         c.w = (c.w * q).round() / q;
     }
-    let key = |p: DVec3| p.to_array().map(f64::to_bits);
-    let nkey = |n: &[glam::Vec3; 2]| [n[0].to_array(), n[1].to_array()].map(|v| v.map(f32::to_bits));
-    edges.sort_by(|a, b| key(a.p).cmp(&key(b.p)).then(nkey(&a.n).cmp(&nkey(&b.n))));
-    corners.sort_by(|a, b| key(a.p).cmp(&key(b.p)).then(a.w.total_cmp(&b.w)));
-    counts.edge_points = edges.len() as u64;
-    counts.corner_points = corners.len() as u64;
-    let origin = edges.iter().map(|e| e.p).reduce(DVec3::min).unwrap_or(DVec3::ZERO);
-    let t = Instant::now();
-    let local_corners: Vec<project::CornerPoint> = corners.iter().map(|c| project::CornerPoint { p: c.p - origin, w: c.w }).collect();
-    let grouped = project::group_corners(&local_corners, r.corner_radius, 3);
-    counts.corners = grouped.len() as u64;
-    // (The edge cloud is the one part of a run that grows with the whole input, not with a
-    // tile, so it is held once: normals are copied out first, then the positions reuse the
-    // records' allocation, as collecting a consumed vector into smaller items of the same
-    // alignment does in place.)
-    let normals: Vec<[glam::Vec3; 2]> = edges.iter().map(|e| e.n).collect();
-    let edge_pos: Vec<DVec3> = edges.into_iter().map(|e| e.p - origin).collect();
-    let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: 2.0 * r.rmls_radius };
-    let smoothed = smooth::smooth(&edge_pos, &grouped, &sp);
-    seconds.smoothing = t.elapsed().as_secs_f64();
-    // Diagnostics: with CREASE_DEBUG_DIR set, the edge cloud, its smoothed form, the corners
-    // and the grown polylines are written there as OBJ files.
-    if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
-        let dump = |name: &str, pts: &[DVec3]| {
-            let text: String = pts.iter().map(|p| { let p = *p + origin; format!("v {} {} {}\n", p.x, p.y, p.z) }).collect();
-            let _ = std::fs::write(std::path::Path::new(&dir).join(name), text);
-        };
-        dump("edges.obj", &edge_pos);
-        dump("smoothed.obj", &smoothed);
-        dump("corners.obj", &grouped);
+    corners.sort_unstable_by(|a, b| pos_key(a.p).cmp(&pos_key(b.p)).then(a.w.total_cmp(&b.w)));
+    let local: Vec<project::CornerPoint> = corners.iter().map(|c| project::CornerPoint { p: c.p - origin, w: c.w }).collect();
+    project::group_corners(&local, r.corner_radius, 3)
+}
+
+/// Largest distance from an edge point to the edge points that move it in stage 3: a block
+/// of the edge cloud is smoothed exactly as in the whole cloud if every edge point this close
+/// to the block is given as context.
+pub fn smoothing_reach(r: &Resolved) -> f64 {
+    2.0 * r.rmls_radius
+}
+
+/// Stage 3 for a block of the (snapped) edge cloud, positions relative to `origin`: the first
+/// `own` points are smoothed, the rest are the context within [`smoothing_reach`] of them.
+/// The smoothed positions are snapped as the input is.
+pub fn smooth_block(points: &[DVec3], own: usize, grouped: &[DVec3], r: &Resolved) -> Vec<DVec3> {
+    let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: smoothing_reach(r) };
+    let q = snap_quantum(r.kappa);
+    let mut out = smooth::smooth(points, own, grouped, &sp);
+    for p in out.iter_mut() {
+        *p = snap(*p, q);
     }
-    drop(edge_pos);
+    out
+}
+
+/// Stages 4 and 5 on the whole smoothed edge cloud (positions relative to `origin`, with the
+/// normals of each point's two surfaces), in any order: polyline growing and completion.
+pub fn curves_from_smoothed(points: Vec<DVec3>, normals: Vec<[glam::Vec3; 2]>, grouped: &[DVec3], origin: DVec3, r: &Resolved, counts: &mut Counts, seconds: &mut Timings) -> Vec<Polyline> {
+    // Sorted first, so the result does not depend on the order the points arrive in. (The
+    // edge cloud is the one part of a run that grows with the whole input, not with a tile:
+    // it is reordered through a permutation rather than as records, so that at most one
+    // extra copy of one of its columns exists at a time.)
+    let mut perm: Vec<u32> = (0..points.len() as u32).collect();
+    perm.sort_unstable_by(|&a, &b| {
+        let (a, b) = (a as usize, b as usize);
+        pos_key(points[a]).cmp(&pos_key(points[b])).then(normal_key(&normals[a]).cmp(&normal_key(&normals[b])))
+    });
+    let points = permute(points, &perm);
+    let normals = permute(normals, &perm);
+    drop(perm);
+    if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
+        debug_dump(&dir, "smoothed.obj", &points, origin);
+        debug_dump(&dir, "corners.obj", grouped, origin);
+    }
     let t = Instant::now();
-    let grown = grow::grow(&smoothed, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg });
+    let index = (!points.is_empty()).then(|| Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
+    let grown = index.as_ref().map_or(vec![], |ix| grow::grow(&points, ix, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg }));
     counts.grown = grown.len() as u64;
     if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
         let pl: Vec<Polyline> = grown.iter().enumerate().map(|(i, g)| Polyline::from_points(i as u32, g.vertices.iter().map(|p| *p + origin))).collect();
@@ -360,11 +392,49 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, mut corners: Vec<WorldCorner
     seconds.growing = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2 };
-    let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), &grouped, &cp);
-    let curves = to_polylines(&curves, &smoothed, &normals, origin, r.step);
+    let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), grouped, &cp);
+    let curves = to_polylines(&curves, index.as_ref(), &normals, origin, r.step);
     counts.curves = curves.len() as u64;
     seconds.completion = t.elapsed().as_secs_f64();
     curves
+}
+
+/// `v` reordered by `perm` (consumed, so that the unordered copy is freed at once).
+fn permute<T: Copy>(v: Vec<T>, perm: &[u32]) -> Vec<T> {
+    perm.iter().map(|&i| v[i as usize]).collect()
+}
+
+/// With CREASE_DEBUG_DIR set, the curve stages write their intermediate point sets there as
+/// OBJ files (edge cloud, smoothed cloud, corners, grown polylines).
+pub fn debug_dump(dir: &str, name: &str, pts: &[DVec3], origin: DVec3) {
+    let text: String = pts.iter().map(|p| {
+        let p = *p + origin;
+        format!("v {} {} {}\n", p.x, p.y, p.z)
+    }).collect();
+    let _ = std::fs::write(std::path::Path::new(dir).join(name), text);
+}
+
+/// Stages 3 to 5 on a whole edge cloud held in memory, in any order.
+pub fn curves_from_edges(mut edges: Vec<WorldEdge>, corners: Vec<WorldCorner>, r: &Resolved, counts: &mut Counts, seconds: &mut Timings) -> Vec<Polyline> {
+    let q = snap_quantum(r.kappa);
+    for e in edges.iter_mut() {
+        snap_edge(e, q);
+    }
+    counts.edge_points = edges.len() as u64;
+    counts.corner_points = corners.len() as u64;
+    let origin = edges.iter().map(|e| e.p).reduce(DVec3::min).unwrap_or(DVec3::ZERO);
+    let t = Instant::now();
+    let grouped = group_corners(corners, origin, r);
+    counts.corners = grouped.len() as u64;
+    let normals: Vec<[glam::Vec3; 2]> = edges.iter().map(|e| e.n).collect();
+    let local: Vec<DVec3> = edges.into_iter().map(|e| e.p - origin).collect();
+    if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
+        debug_dump(&dir, "edges.obj", &local, origin);
+    }
+    let smoothed = smooth_block(&local, local.len(), &grouped, r);
+    drop(local);
+    seconds.smoothing = t.elapsed().as_secs_f64();
+    curves_from_smoothed(smoothed, normals, &grouped, origin, r, counts, seconds)
 }
 
 /// Extracts feature curves from `points` (world coordinates) held in memory: the whole cloud
@@ -425,9 +495,7 @@ pub fn keep_point(id: u64, keep: f64, seed: u64) -> bool {
 
 /// Attaches normals (from the nearest edge points, orientation carried along each curve) and
 /// converts to world coordinates.
-fn to_polylines(curves: &[complete::Curve], smoothed: &[DVec3], edge_normals: &[[glam::Vec3; 2]], origin: DVec3, step: f64) -> Vec<Polyline> {
-    let f32s: Vec<[f32; 3]> = smoothed.iter().map(|q| q.as_vec3().to_array()).collect();
-    let index = (!f32s.is_empty()).then(|| Index::new(&f32s));
+fn to_polylines(curves: &[complete::Curve], index: Option<&Index>, edge_normals: &[[glam::Vec3; 2]], origin: DVec3, step: f64) -> Vec<Polyline> {
     let mut nn = Vec::new();
     curves
         .iter()
@@ -440,7 +508,7 @@ fn to_polylines(curves: &[complete::Curve], smoothed: &[DVec3], edge_normals: &[
                     continue;
                 }
                 nn.clear();
-                if let Some(ix) = &index {
+                if let Some(ix) = index {
                     ix.within(&p.as_vec3().to_array(), (0.5 * step) as f32, &mut nn);
                     if nn.is_empty() {
                         ix.nearest_n(&p.as_vec3().to_array(), 1, &mut nn);

@@ -24,15 +24,20 @@ pub struct SmoothParams {
 const MIN_K: usize = 8;
 const MAX_K: usize = 64;
 
-/// Smoothed positions of `points`; `corners` cap the neighbourhoods.
-pub fn smooth(points: &[DVec3], corners: &[DVec3], p: &SmoothParams) -> Vec<DVec3> {
+/// Smoothed positions of the first `own` of `points`; the rest are context only (the edge
+/// points around a block of the cloud, which every neighbourhood of the block may take in).
+/// `corners` cap the neighbourhoods. The result depends only on the set of points within the
+/// largest radius of each smoothed point, not on their order or on what lies further out, so a
+/// cloud smoothed block by block gives what it gives smoothed whole.
+pub fn smooth(points: &[DVec3], own: usize, corners: &[DVec3], p: &SmoothParams) -> Vec<DVec3> {
     if points.len() < MIN_K {
-        return points.to_vec();
+        return points[..own].to_vec();
     }
-    // (The f32 copy is only the tree's input: the edge cloud grows with the whole scan.)
+    // (The f32 copy is only the tree's input.)
     let index = Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>());
     let corner_index = (!corners.is_empty()).then(|| Index::new(&corners.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
-    (0..points.len())
+    let key = |j: u32| points[j as usize].to_array().map(f64::to_bits);
+    (0..own)
         .into_par_iter()
         .map_init(Vec::new, |nn, i| {
             let x = points[i];
@@ -45,6 +50,9 @@ pub fn smooth(points: &[DVec3], corners: &[DVec3], p: &SmoothParams) -> Vec<DVec
             let radius = p.max_radius.min(cap);
             nn.clear();
             index.nearest_n(&xf, MAX_K.min(points.len()), nn);
+            // Points at equal distance come in the tree's order, which depends on what else
+            // the tree holds; order them by position so the PCA sums are always the same.
+            nn.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then_with(|| key(a.0).cmp(&key(b.0))));
             let mut k = MIN_K;
             let mut best: Option<Pca> = None;
             while k <= nn.len() {
@@ -66,4 +74,49 @@ pub fn smooth(points: &[DVec3], corners: &[DVec3], p: &SmoothParams) -> Vec<DVec
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::rng::Rng;
+
+    /// Noisy points along two segments meeting at a corner.
+    fn polyline_cloud() -> Vec<DVec3> {
+        let mut rng = Rng::new(7);
+        let mut pts = vec![];
+        for i in 0..400 {
+            let t = i as f64 / 400.0;
+            let on = if t < 0.5 { DVec3::new(t * 2.0, 0.0, 0.0) } else { DVec3::new(1.0, (t - 0.5) * 2.0, 0.2 * (t - 0.5)) };
+            pts.push(on + rng.in_ball(0.01));
+        }
+        pts
+    }
+
+    #[test]
+    fn smoothing_in_blocks_with_context_equals_smoothing_whole() {
+        let pts = polyline_cloud();
+        let corners = [DVec3::new(1.0, 0.0, 0.0)];
+        let p = SmoothParams { linearity: 0.95, max_radius: 0.1 };
+        let whole = smooth(&pts, pts.len(), &corners, &p);
+        // Moved, and towards the segments.
+        assert!(whole.iter().zip(&pts).filter(|(a, b)| a != b).count() > pts.len() / 2);
+        // Blocks split at x = 0.7 and x = 1.0 (through the corner), each given, after its own
+        // points, the others within reach of its bounds, in reverse order.
+        let cuts = [f64::NEG_INFINITY, 0.7, 1.0, f64::INFINITY];
+        let mut by_block = vec![DVec3::ZERO; pts.len()];
+        for w in cuts.windows(2) {
+            let own: Vec<usize> = (0..pts.len()).filter(|&i| pts[i].x >= w[0] && pts[i].x < w[1]).collect();
+            let lo = own.iter().map(|&i| pts[i]).reduce(DVec3::min).unwrap() - DVec3::splat(p.max_radius * 1.01);
+            let hi = own.iter().map(|&i| pts[i]).reduce(DVec3::max).unwrap() + DVec3::splat(p.max_radius * 1.01);
+            let mut block: Vec<DVec3> = own.iter().map(|&i| pts[i]).collect();
+            block.extend(
+                (0..pts.len()).rev().filter(|&i| !(pts[i].x >= w[0] && pts[i].x < w[1])).map(|i| pts[i]).filter(|q| q.cmpge(lo).all() && q.cmple(hi).all()),
+            );
+            for (k, s) in smooth(&block, own.len(), &corners, &p).into_iter().enumerate() {
+                by_block[own[k]] = s;
+            }
+        }
+        assert_eq!(whole, by_block);
+    }
 }
