@@ -405,6 +405,7 @@ fn synth_cmd(what: SynthCmd) -> Result<(), Error> {
 }
 
 fn main() -> ExitCode {
+    crease::mem::map_large_blocks_apart();
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,

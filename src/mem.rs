@@ -26,6 +26,20 @@ fn status_kib(key: &str) -> u64 {
         .unwrap_or(0)
 }
 
+/// Makes the allocator give every block of 1 MiB or more its own mapping, returned to the
+/// operating system when freed. glibc does so by default only up to a threshold it raises to
+/// the largest block freed so far (up to 32 MiB), so a tile's buffers, freed and allocated
+/// again for the next tile, end up in the heaps, fragmented, and are never returned. Measured
+/// on a 10 M-point run with `--memory 1G`: peak RSS 551-589 MB before, 405-422 MB after, at
+/// the same speed. Process-wide, so the command-line tool calls it, not the library.
+pub fn map_large_blocks_apart() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes a tuning parameter of the allocator.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 20);
+    }
+}
+
 /// Hands memory freed by finished work back to the operating system where the allocator would
 /// keep it (glibc keeps the freed blocks of every thread's arena mapped). Called between the
 /// tile passes and the curve stage, so that the memory the tile passes used is not counted a
