@@ -484,6 +484,10 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
                 res.binary_search_by_key(&g, |p| p.0).map_or(false, |k| res[k].1 as f64 > tau)
             })
             .collect();
+        if let Ok(d) = std::env::var("CREASE_DEBUG_DIR") {
+            let pts: Vec<DVec3> = cand.iter().map(|&i| cloud.at(i as usize)).collect();
+            extract::debug_dump(&d, &format!("candidates_{t}.obj"), &pts, cloud.origin);
+        }
         let (edges, corners, one) = extract::project_core(&cloud, &cand, &r);
         Ok(encode_edges(&edges, &corners, cand.len() as u64, one))
     })?;

@@ -405,7 +405,7 @@ fn permute<T: Copy>(v: Vec<T>, perm: &[u32]) -> Vec<T> {
 }
 
 /// With CREASE_DEBUG_DIR set, the curve stages write their intermediate point sets there as
-/// OBJ files (edge cloud, smoothed cloud, corners, grown polylines).
+/// OBJ files (candidates per tile, edge cloud, smoothed cloud, corners, grown polylines).
 pub fn debug_dump(dir: &str, name: &str, pts: &[DVec3], origin: DVec3) {
     let text: String = pts.iter().map(|p| {
         let p = *p + origin;
