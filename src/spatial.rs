@@ -38,6 +38,16 @@ impl Index {
         }
     }
 
+    /// Index and squared distance of the (at most) `k` points nearest to `q` within `radius`,
+    /// nearest first. Far cheaper than [`Index::nearest_n`] where the radius prunes.
+    #[inline]
+    pub fn nearest_n_within(&self, q: &[f32; 3], k: usize, radius: f32, out: &mut Vec<(u32, f32)>) {
+        let Some(k) = NonZero::new(k) else { return };
+        for r in self.tree.query(q).nearest_n::<SquaredEuclidean<f32>>(k).within(radius * radius).execute() {
+            out.push((r.item, r.distance));
+        }
+    }
+
     /// Number of points in the tree.
     pub fn len(&self) -> usize {
         self.tree.size()

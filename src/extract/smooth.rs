@@ -49,7 +49,9 @@ pub fn smooth(points: &[DVec3], own: usize, corners: &[DVec3], p: &SmoothParams)
             });
             let radius = p.max_radius.min(cap);
             nn.clear();
-            index.nearest_n(&xf, MAX_K.min(points.len()), nn);
+            // (Queried a little wide: whether a point is within the radius is decided below,
+            // in f64, as it always was.)
+            index.nearest_n_within(&xf, MAX_K.min(points.len()), (radius * (1.0 + 1e-5)) as f32 + f32::EPSILON, nn);
             // Points at equal distance come in the tree's order, which depends on what else
             // the tree holds; order them by position so the PCA sums are always the same.
             nn.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then_with(|| key(a.0).cmp(&key(b.0))));
