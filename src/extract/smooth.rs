@@ -23,6 +23,8 @@ pub struct SmoothParams {
 /// Smallest and largest neighbourhood sizes tried.
 const MIN_K: usize = 8;
 const MAX_K: usize = 64;
+/// Neighbours asked for first (one more than the neighbourhood sizes tried with them).
+const FIRST_K: usize = 17;
 
 /// Smoothed positions of the first `own` of `points`; the rest are context only (the edge
 /// points around a block of the cloud, which every neighbourhood of the block may take in).
@@ -48,27 +50,48 @@ pub fn smooth(points: &[DVec3], own: usize, corners: &[DVec3], p: &SmoothParams)
                 corners[c[0].0 as usize].distance(x)
             });
             let radius = p.max_radius.min(cap);
-            nn.clear();
             // (Queried a little wide: whether a point is within the radius is decided below,
-            // in f64, as it always was.)
-            index.nearest_n_within(&xf, MAX_K.min(points.len()), (radius * (1.0 + 1e-5)) as f32 + f32::EPSILON, nn);
-            // Points at equal distance come in the tree's order, which depends on what else
-            // the tree holds; order them by position so the PCA sums are always the same.
-            nn.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then_with(|| key(a.0).cmp(&key(b.0))));
-            let mut k = MIN_K;
+            // in f64.) Most neighbourhoods are linear within a few points, so the nearest
+            // FIRST_K - 1 are asked for first, and the rest only if they do not suffice.
+            let r32 = (radius * (1.0 + 1e-5)) as f32 + f32::EPSILON;
             let mut best: Option<Pca> = None;
-            while k <= nn.len() {
-                if (nn[k - 1].1 as f64).sqrt() > radius {
-                    break;
-                }
-                let pca = Pca::of(nn[..k].iter().map(|&(j, _)| (points[j as usize], 1.0)));
-                if let Some(pca) = pca {
-                    best = Some(pca);
-                    if pca.line_measure() >= p.linearity {
+            let mut k = MIN_K;
+            for want in [FIRST_K, MAX_K] {
+                let want = want.min(points.len());
+                nn.clear();
+                index.nearest_n_within(&xf, want, r32, nn);
+                // Points at equal distance come in the tree's order, which depends on what
+                // else the tree holds; order them by position so the PCA sums are always the same.
+                nn.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then_with(|| key(a.0).cmp(&key(b.0))));
+                // All points within the radius came back, or the first want - 1 are surely
+                // the nearest (the next is strictly farther), or (a tie at the cut) none are.
+                let complete = nn.len() < want || want == MAX_K.min(points.len());
+                let usable = if complete {
+                    nn.len()
+                } else if nn[want - 1].1 > nn[want - 2].1 {
+                    want - 1
+                } else {
+                    0
+                };
+                let mut done = false;
+                while k <= usable {
+                    if (nn[k - 1].1 as f64).sqrt() > radius {
+                        done = true;
                         break;
                     }
+                    let pca = Pca::of(nn[..k].iter().map(|&(j, _)| (points[j as usize], 1.0)));
+                    if let Some(pca) = pca {
+                        best = Some(pca);
+                        if pca.line_measure() >= p.linearity {
+                            done = true;
+                            break;
+                        }
+                    }
+                    k += 4;
                 }
-                k += 4;
+                if done || complete {
+                    break;
+                }
             }
             match best {
                 Some(pca) => pca.mean + pca.axis() * (x - pca.mean).dot(pca.axis()),
