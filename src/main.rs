@@ -51,7 +51,7 @@ struct ParamArgs {
     /// Largest turn while growing, degrees.
     #[arg(long)]
     max_turn: Option<f64>,
-    /// Gentlest crease kept: degrees between the two surface normals (default 25).
+    /// Gentlest crease kept: degrees between the two surface normals (default 28).
     #[arg(long)]
     min_angle: Option<f64>,
     /// Random seed of the robust fits.

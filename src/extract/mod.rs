@@ -38,7 +38,7 @@ pub struct Params {
     /// Largest turn while growing, degrees (default 30).
     pub max_turn_deg: Option<f64>,
     /// Creases whose surface normals differ by less than this many degrees are ignored
-    /// (default 25).
+    /// (default 28).
     pub min_angle_deg: Option<f64>,
     /// Seed of the robust fits' random streams (default 1).
     pub seed: Option<u64>,
@@ -101,7 +101,7 @@ impl Params {
             min_threshold: 0.05 * scale,
             step,
             max_turn_deg: self.max_turn_deg.unwrap_or(30.0),
-            min_angle_deg: self.min_angle_deg.unwrap_or(25.0),
+            min_angle_deg: self.min_angle_deg.unwrap_or(28.0),
             corner_radius: rmls,
             reach_steps: 4.0,
             aperture_deg: 45.0,
