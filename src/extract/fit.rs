@@ -155,21 +155,39 @@ impl Quadric {
     /// curvature terms are damped by `ridge` (relative to the data's spread) so that a
     /// one-sided or sparse neighbourhood falls back smoothly towards a plane.
     pub fn fit(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> Option<Quadric> {
-        let mut m = Matrix6::<f64>::zeros();
-        let mut b = Vector6::<f64>::zeros();
+        // The normal equations, accumulated on their upper triangle only (the products are
+        // those of `row * row^T * w`, so the sums are the same to the bit).
+        let mut upper = [0.0f64; 21];
+        let mut b = [0.0f64; 6];
         let mut scale2 = 0.0;
         let mut sw = 0.0;
         for (p, w) in points {
             let l = frame.local(p);
-            let row = Vector6::new(1.0, l.x, l.y, l.x * l.x, l.x * l.y, l.y * l.y);
-            m += row * row.transpose() * w;
-            b += row * (l.z * w);
+            let row = [1.0, l.x, l.y, l.x * l.x, l.x * l.y, l.y * l.y];
+            let mut k = 0;
+            for i in 0..6 {
+                for j in i..6 {
+                    upper[k] += row[i] * row[j] * w;
+                    k += 1;
+                }
+                b[i] += row[i] * (l.z * w);
+            }
             scale2 += w * (l.x * l.x + l.y * l.y);
             sw += w;
         }
         if sw <= 0.0 {
             return None;
         }
+        let mut m = Matrix6::<f64>::zeros();
+        let mut k = 0;
+        for i in 0..6 {
+            for j in i..6 {
+                m[(i, j)] = upper[k];
+                m[(j, i)] = upper[k];
+                k += 1;
+            }
+        }
+        let b = Vector6::from(b);
         let s2 = (scale2 / sw).max(1e-300);
         for i in 3..6 {
             m[(i, i)] += ridge * sw * s2 * s2;
