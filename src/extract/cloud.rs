@@ -20,6 +20,10 @@ pub struct Cloud {
     pub gid: Vec<u64>,
     /// Neighbour index over `points`.
     pub index: Index,
+    /// Each point's rank in coordinate order (x, then y, then z, then global id), built the
+    /// first time a neighbourhood must be ordered: comparing two ranks is far cheaper than
+    /// comparing coordinates.
+    rank: std::sync::OnceLock<Vec<u32>>,
 }
 
 /// Spreads the low 21 bits of `v` to every third bit.
@@ -57,7 +61,7 @@ impl Cloud {
         let points: Vec<[f32; 3]> = pos.iter().map(|p| p.as_vec3().to_array()).collect();
         let gid: Vec<u64> = ids.iter().map(|&i| gids[i as usize]).collect();
         let index = Index::new(&points);
-        Cloud { origin, points, pos, ids, gid, index }
+        Cloud { origin, points, pos, ids, gid, index, rank: std::sync::OnceLock::new() }
     }
 
     /// Number of points.
@@ -114,6 +118,38 @@ impl Cloud {
         self.order_and_thin(max, ordered, out);
     }
 
+    /// Ranks of the points in coordinate order (see `rank`), sorted on this thread if not yet
+    /// known. (Not in parallel: a rayon worker waiting in a parallel sort could pick up a job
+    /// that asks for the ranks again, re-entering the initialisation.)
+    fn rank(&self) -> &[u32] {
+        self.rank.get_or_init(|| self.ranks(false))
+    }
+
+    /// Builds the coordinate ranks with all threads, ahead of a parallel pass that orders
+    /// neighbourhoods (call it outside any parallel section).
+    pub fn prepare_ordering(&self) {
+        self.rank.get_or_init(|| self.ranks(true));
+    }
+
+    fn ranks(&self, parallel: bool) -> Vec<u32> {
+        let cmp = |&a: &u32, &b: &u32| {
+            let (p, q) = (self.pos[a as usize], self.pos[b as usize]);
+            p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(self.gid[a as usize].cmp(&self.gid[b as usize]))
+        };
+        let mut order: Vec<u32> = (0..self.len() as u32).collect();
+        if parallel {
+            use rayon::prelude::*;
+            order.par_sort_unstable_by(cmp);
+        } else {
+            order.sort_unstable_by(cmp);
+        }
+        let mut rank = vec![0u32; order.len()];
+        for (k, &i) in order.iter().enumerate() {
+            rank[i as usize] = k as u32;
+        }
+        rank
+    }
+
     /// Neighbours in coordinate order: every fit, subsample and choice over them is then the
     /// same whatever the tiling, the thread count, or how the points were split into files.
     /// With `ordered` false the order is left alone unless the set must be thinned to `max`.
@@ -121,10 +157,8 @@ impl Cloud {
         if !ordered && out.len() <= max {
             return;
         }
-        out.sort_unstable_by(|a, b| {
-            let (p, q) = (self.pos[a.0 as usize], self.pos[b.0 as usize]);
-            p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(self.gid[a.0 as usize].cmp(&self.gid[b.0 as usize]))
-        });
+        let rank = self.rank();
+        out.sort_unstable_by_key(|a| rank[a.0 as usize]);
         if out.len() > max {
             let stride = out.len().div_ceil(max);
             let mut k = 0;
@@ -149,6 +183,9 @@ impl Cloud {
     ) -> Vec<T> {
         use rayon::prelude::*;
         let Neighbourhood { radius: r, min, max, ordered } = nb;
+        if ordered {
+            self.prepare_ordering();
+        }
         let cell = |i: u32| (self.pos[i as usize] / r).floor().as_i64vec3().to_array();
         let mut order: Vec<([i64; 3], u32, u32)> = which.iter().enumerate().map(|(k, &i)| (cell(i), k as u32, i)).collect();
         order.par_sort_unstable();
