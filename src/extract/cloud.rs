@@ -20,9 +20,9 @@ pub struct Cloud {
     pub gid: Vec<u64>,
     /// Neighbour index over `points`.
     pub index: Index,
-    /// Each point's rank in coordinate order (x, then y, then z, then global id), built the
-    /// first time a neighbourhood must be ordered: comparing two ranks is far cheaper than
-    /// comparing coordinates.
+    /// Each point's rank in coordinate order (x, then y, then z, then global id), if built
+    /// (see [`Cloud::prepare_ordering`]): comparing two ranks is far cheaper than comparing
+    /// coordinates.
     rank: std::sync::OnceLock<Vec<u32>>,
 }
 
@@ -118,36 +118,28 @@ impl Cloud {
         self.order_and_thin(max, ordered, out);
     }
 
-    /// Ranks of the points in coordinate order (see `rank`), sorted on this thread if not yet
-    /// known. (Not in parallel: a rayon worker waiting in a parallel sort could pick up a job
-    /// that asks for the ranks again, re-entering the initialisation.)
-    fn rank(&self) -> &[u32] {
-        self.rank.get_or_init(|| self.ranks(false))
-    }
-
-    /// Builds the coordinate ranks with all threads, ahead of a parallel pass that orders
-    /// neighbourhoods (call it outside any parallel section).
+    /// Builds the coordinate ranks (see `rank`) ahead of a parallel pass that orders many
+    /// neighbourhoods; call it outside any parallel section. Without them, neighbourhoods
+    /// are ordered by comparing coordinates, in the same order.
     pub fn prepare_ordering(&self) {
-        self.rank.get_or_init(|| self.ranks(true));
+        self.rank.get_or_init(|| self.ranks());
     }
 
-    fn ranks(&self, parallel: bool) -> Vec<u32> {
-        let cmp = |&a: &u32, &b: &u32| {
-            let (p, q) = (self.pos[a as usize], self.pos[b as usize]);
-            p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(self.gid[a as usize].cmp(&self.gid[b as usize]))
-        };
+    fn ranks(&self) -> Vec<u32> {
+        use rayon::prelude::*;
         let mut order: Vec<u32> = (0..self.len() as u32).collect();
-        if parallel {
-            use rayon::prelude::*;
-            order.par_sort_unstable_by(cmp);
-        } else {
-            order.sort_unstable_by(cmp);
-        }
+        order.par_sort_unstable_by(|&a, &b| self.coordinate_order(a, b));
         let mut rank = vec![0u32; order.len()];
         for (k, &i) in order.iter().enumerate() {
             rank[i as usize] = k as u32;
         }
         rank
+    }
+
+    /// Points by x, then y, then z, then global id.
+    fn coordinate_order(&self, a: u32, b: u32) -> std::cmp::Ordering {
+        let (p, q) = (self.pos[a as usize], self.pos[b as usize]);
+        p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(self.gid[a as usize].cmp(&self.gid[b as usize]))
     }
 
     /// Neighbours in coordinate order: every fit, subsample and choice over them is then the
@@ -157,8 +149,10 @@ impl Cloud {
         if !ordered && out.len() <= max {
             return;
         }
-        let rank = self.rank();
-        out.sort_unstable_by_key(|a| rank[a.0 as usize]);
+        match self.rank.get() {
+            Some(rank) => out.sort_unstable_by_key(|a| rank[a.0 as usize]),
+            None => out.sort_unstable_by(|a, b| self.coordinate_order(a.0, b.0)),
+        }
         if out.len() > max {
             let stride = out.len().div_ceil(max);
             let mut k = 0;
@@ -266,4 +260,43 @@ pub struct Neighbourhood {
     pub max: usize,
     /// Points in coordinate order (otherwise in no particular order unless thinned).
     pub ordered: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ordered_neighbourhoods_are_the_same_with_and_without_the_coordinate_ranks() {
+        // A jittered grid with repeated coordinates (ties broken by global id), and a cell
+        // dense enough that the ball must be thinned.
+        let mut rng = crate::synth::rng::Rng::stream(3, 0);
+        let mut world: Vec<DVec3> = (0..4000).map(|_| DVec3::new(rng.f64(), rng.f64(), 0.01 * rng.f64()) * 10.0).collect();
+        for k in 0..500 {
+            world.push(world[k * 3]);
+        }
+        let gids: Vec<u64> = (0..world.len() as u64).rev().collect();
+        let cloud = Cloud::with_origin(&world, &gids, DVec3::new(-1.0, -1.0, -1.0));
+        let which: Vec<u32> = (0..cloud.len() as u32).step_by(7).collect();
+        let nb = Neighbourhood { radius: 0.6, min: 10, max: 40, ordered: false };
+        let gather = |c: &Cloud| c.map_neighbourhoods(&which, Neighbourhood { ordered: true, ..nb }, || (), |_, _, buf| buf.to_vec());
+        let plain: Vec<Vec<(u32, f32)>> = which
+            .iter()
+            .map(|&i| {
+                let mut out = Vec::new();
+                cloud.neighbours(cloud.at(i as usize), 0.6, 10, 40, &mut out);
+                out
+            })
+            .collect();
+        assert!(cloud.rank.get().is_none());
+        assert!(plain.iter().any(|b| b.len() == 40), "no ball was thinned");
+        // map_neighbourhoods builds the ranks; the per-point queries above compared coordinates.
+        let ranked = gather(&cloud);
+        assert!(cloud.rank.get().is_some());
+        let ids = |v: &Vec<Vec<(u32, f32)>>| v.iter().map(|b| b.iter().map(|a| a.0).collect::<Vec<_>>()).collect::<Vec<_>>();
+        assert_eq!(ids(&plain), ids(&ranked));
+        for (b, _) in plain.iter().zip(0..) {
+            assert!(b.windows(2).all(|w| cloud.coordinate_order(w[0].0, w[1].0).is_lt()));
+        }
+    }
 }
