@@ -75,6 +75,12 @@ const SEED_PATCH: usize = 6;
 /// are one surface; below 1 so that acute wedges, whose planes are as close as those of a
 /// gentle fold, are still split (`crease_angle` then tells them apart).
 const MIN_SPLIT_FRACTION: f64 = 0.8;
+/// A seed plane whose low quantile of residuals is within this many noise deviations ends the
+/// search for better seeds. (0.674, the median of a normal deviate, was used before; 1.0 takes
+/// about 20% less projection work, and the quality table moved by no more than it does when
+/// only the random seed changes: mean |change| 0.013 in recall and 0.020 in precision over
+/// the noisy rows, against 0.015 and 0.019 for a new seed.)
+const SEED_FLOOR: f64 = 1.0;
 /// Rounds of exclusive re-assignment and re-fitting.
 const REFINE_ROUNDS: usize = 5;
 /// Most surfaces looked for.
@@ -120,7 +126,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     s.remaining.extend(0..n);
     let mut surfaces: Vec<Surface> = Vec::new();
     while s.remaining.len() >= min_count && surfaces.len() < MAX_SURFACES {
-        let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count, 0.674 * p.noise) else { break };
+        let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count, SEED_FLOOR * p.noise) else { break };
         // A "new" surface (nearly) parallel to one already found is the same surface's
         // leftovers. (How sharp a crease is can only be told once its edge is known: see
         // `crease_angle`.)
