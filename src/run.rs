@@ -402,11 +402,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
                 let sample: Vec<usize> = (0..cloud.len())
                     .filter(|&i| core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed))
                     .collect();
-                // (The coordinate ranks pay off only where the sample is a fair share of the
-                // tile, as in small clouds; either way the neighbourhoods come in one order.)
-                if sample.len() * 64 >= cloud.len() {
-                    cloud.prepare_ordering();
-                }
+                cloud.prepare_ordering(sample.len());
                 let stats: Vec<Option<(f64, f64, f64)>> =
                     sample.par_iter().map_init(Vec::new, |buf, &i| extract::point_stats(&cloud, i, buf)).collect();
                 let mut out: Vec<u8> = Vec::new();

@@ -118,11 +118,14 @@ impl Cloud {
         self.order_and_thin(max, ordered, out);
     }
 
-    /// Builds the coordinate ranks (see `rank`) ahead of a parallel pass that orders many
-    /// neighbourhoods; call it outside any parallel section. Without them, neighbourhoods
-    /// are ordered by comparing coordinates, in the same order.
-    pub fn prepare_ordering(&self) {
-        self.rank.get_or_init(|| self.ranks());
+    /// Builds the coordinate ranks (see `rank`) ahead of a parallel pass that orders the
+    /// neighbourhoods of `queries` points, if that many pay for ranking the whole cloud; call
+    /// it outside any parallel section. Without the ranks, neighbourhoods are ordered by
+    /// comparing coordinates, in the same order.
+    pub fn prepare_ordering(&self, queries: usize) {
+        if queries * 64 >= self.len() {
+            self.rank.get_or_init(|| self.ranks());
+        }
     }
 
     fn ranks(&self) -> Vec<u32> {
@@ -178,7 +181,7 @@ impl Cloud {
         use rayon::prelude::*;
         let Neighbourhood { radius: r, min, max, ordered } = nb;
         if ordered {
-            self.prepare_ordering();
+            self.prepare_ordering(which.len());
         }
         let cell = |i: u32| (self.pos[i as usize] / r).floor().as_i64vec3().to_array();
         let mut order: Vec<([i64; 3], u32, u32)> = which.iter().enumerate().map(|(k, &i)| (cell(i), k as u32, i)).collect();
@@ -278,8 +281,6 @@ mod tests {
         let gids: Vec<u64> = (0..world.len() as u64).rev().collect();
         let cloud = Cloud::with_origin(&world, &gids, DVec3::new(-1.0, -1.0, -1.0));
         let which: Vec<u32> = (0..cloud.len() as u32).step_by(7).collect();
-        let nb = Neighbourhood { radius: 0.6, min: 10, max: 40, ordered: false };
-        let gather = |c: &Cloud| c.map_neighbourhoods(&which, Neighbourhood { ordered: true, ..nb }, || (), |_, _, buf| buf.to_vec());
         let plain: Vec<Vec<(u32, f32)>> = which
             .iter()
             .map(|&i| {
@@ -291,11 +292,12 @@ mod tests {
         assert!(cloud.rank.get().is_none());
         assert!(plain.iter().any(|b| b.len() == 40), "no ball was thinned");
         // map_neighbourhoods builds the ranks; the per-point queries above compared coordinates.
-        let ranked = gather(&cloud);
+        let nb = Neighbourhood { radius: 0.6, min: 10, max: 40, ordered: true };
+        let ranked = cloud.map_neighbourhoods(&which, nb, || (), |_, _, buf| buf.to_vec());
         assert!(cloud.rank.get().is_some());
         let ids = |v: &Vec<Vec<(u32, f32)>>| v.iter().map(|b| b.iter().map(|a| a.0).collect::<Vec<_>>()).collect::<Vec<_>>();
         assert_eq!(ids(&plain), ids(&ranked));
-        for (b, _) in plain.iter().zip(0..) {
+        for b in &plain {
             assert!(b.windows(2).all(|w| cloud.coordinate_order(w[0].0, w[1].0).is_lt()));
         }
     }
