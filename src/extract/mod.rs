@@ -391,7 +391,7 @@ pub fn curves_from_smoothed(points: Vec<DVec3>, normals: Vec<[glam::Vec3; 2]>, g
     }
     seconds.growing = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2 };
+    let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2, corner_zone: r.corner_radius };
     let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), grouped, &cp);
     let curves = to_polylines(&curves, index.as_ref(), &normals, origin, r.step);
     counts.curves = curves.len() as u64;
