@@ -8,6 +8,7 @@
 //! - the interior of another curve: that curve is split there and a corner created;
 //! - the end of another curve at an angle: both meet at a corner where their tangents cross;
 //! - nothing: a dissipating end, left alone.
+//!
 //! Then each corner is re-solved from the straight runs of its curves just outside the RMLS
 //! radius, where the edge points are not biased by a third surface, and those runs are
 //! continued straight into it (see `resolve_corners`).
@@ -397,7 +398,7 @@ fn resolve_corners(curves: &mut [Curve], zone: f64) {
     }
     // The curve ends at each corner, keyed by the corner's exact position (shared vertices).
     let key = |q: DVec3| [q.x.to_bits(), q.y.to_bits(), q.z.to_bits()];
-    let mut at: HashMap<[u64; 3], Vec<(usize, usize)>> = HashMap::new();
+    let mut at: std::collections::BTreeMap<[u64; 3], Vec<(usize, usize)>> = Default::default();
     for (ci, c) in curves.iter().enumerate() {
         if c.closed || c.v.len() < 2 {
             continue;
@@ -409,9 +410,7 @@ fn resolve_corners(curves: &mut [Curve], zone: f64) {
             }
         }
     }
-    let mut corners: Vec<([u64; 3], Vec<(usize, usize)>)> = at.into_iter().collect();
-    corners.sort_unstable_by_key(|c| c.0);
-    for (k, ends) in corners {
+    for (k, ends) in at {
         let q = DVec3::new(f64::from_bits(k[0]), f64::from_bits(k[1]), f64::from_bits(k[2]));
         // Normal equations of the point nearest to the lines: sum (I - d d^T) (x - mean) = 0.
         let (mut a, mut b) = (glam::DMat3::ZERO, DVec3::ZERO);
