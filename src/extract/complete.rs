@@ -13,7 +13,7 @@
 //! radius, where the edge points are not biased by a third surface, and those runs are
 //! continued straight into it (see `resolve_corners`).
 //! Then short fragments with two free ends are dropped and the curves are relaxed by
-//! inverse-distance Laplacian smoothing with ends and corners fixed.
+//! inverse-distance Laplacian smoothing in Taubin's shrink-free form, with ends and corners fixed.
 
 use glam::DVec3;
 use std::collections::HashMap;
@@ -482,26 +482,35 @@ fn trim_zone(c: &mut Curve, e: usize, zone: f64) {
     }
 }
 
-/// Inverse-distance weighted Laplacian smoothing; ends and corners stay fixed.
+/// Inverse-distance weighted Laplacian smoothing without shrinkage (Taubin 1995): each pass
+/// moves vertices half way to their neighbours' weighted mean, then back by a little more
+/// (factor -0.53), which damps the vertex-to-vertex jitter but not the curve's bends. (Plain
+/// Laplacian passes pull every bend inwards: on the cylinder at 0.01 dB noise the rims shrank
+/// by 0.0014 dB.) Ends and corners stay fixed.
 fn laplacian(c: &mut Curve, passes: usize) {
-    let n = c.v.len();
     for _ in 0..passes {
-        let old = c.v.clone();
-        for i in 0..n {
-            let (prev, next) = if c.closed {
-                ((i + n - 1) % n, (i + 1) % n)
-            } else if i == 0 || i == n - 1 {
-                continue;
-            } else {
-                (i - 1, i + 1)
-            };
-            if c.corner[i] {
-                continue;
-            }
-            let (wa, wb) = (1.0 / old[i].distance(old[prev]).max(1e-12), 1.0 / old[i].distance(old[next]).max(1e-12));
-            let target = (old[prev] * wa + old[next] * wb) / (wa + wb);
-            c.v[i] = old[i] + (target - old[i]) * 0.5;
+        umbrella(c, 0.5);
+        umbrella(c, -0.53);
+    }
+}
+
+fn umbrella(c: &mut Curve, factor: f64) {
+    let n = c.v.len();
+    let old = c.v.clone();
+    for i in 0..n {
+        let (prev, next) = if c.closed {
+            ((i + n - 1) % n, (i + 1) % n)
+        } else if i == 0 || i == n - 1 {
+            continue;
+        } else {
+            (i - 1, i + 1)
+        };
+        if c.corner[i] {
+            continue;
         }
+        let (wa, wb) = (1.0 / old[i].distance(old[prev]).max(1e-12), 1.0 / old[i].distance(old[next]).max(1e-12));
+        let target = (old[prev] * wa + old[next] * wb) / (wa + wb);
+        c.v[i] = old[i] + (target - old[i]) * factor;
     }
 }
 
@@ -554,6 +563,23 @@ mod tests {
         assert!(curves[0].v[0].length() < 1e-9 && curves[2].v[0] == curves[0].v[0]);
         assert_eq!(curves[2].v[1..], before[..]);
         assert_eq!(curves[0].v.len(), 27);
+    }
+
+    #[test]
+    fn relaxation_damps_jitter_without_shrinking_a_loop() {
+        // A unit circle of 64 vertices with alternating radial jitter of 0.01.
+        let radius = |k: usize| 1.0 + if k % 2 == 0 { 0.01 } else { -0.01 };
+        let v = (0..64).map(|k| {
+            let t = k as f64 * std::f64::consts::TAU / 64.0;
+            DVec3::new(t.cos(), t.sin(), 0.0) * radius(k)
+        });
+        let mut c = Curve::new(v.collect(), true);
+        laplacian(&mut c, 2);
+        let r: Vec<f64> = c.v.iter().map(|p| p.length()).collect();
+        let mean = r.iter().sum::<f64>() / r.len() as f64;
+        let jitter = r.iter().map(|x| (x - mean).abs()).fold(0.0, f64::max);
+        assert!((mean - 1.0).abs() < 1e-3, "mean radius {mean}");
+        assert!(jitter < 0.003, "jitter {jitter}");
     }
 
     #[test]
