@@ -40,10 +40,21 @@ impl Curve {
         self.v.windows(2).map(|w| w[0].distance(w[1])).sum()
     }
 
+    /// Index of the vertex at end `e` (0: first vertex, 1: last).
+    fn end_index(&self, e: usize) -> usize {
+        if e == 0 { 0 } else { self.v.len() - 1 }
+    }
+
+    /// The `k`-th vertex counted inwards from end `e`.
+    fn inward(&self, e: usize, k: usize) -> DVec3 {
+        self.v[if e == 0 { k } else { self.v.len() - 1 - k }]
+    }
+
     /// Position, outward tangent and corner flag of end `e` (0: first vertex, 1: last).
     fn end(&self, e: usize) -> (DVec3, DVec3, bool) {
         let n = self.v.len();
-        let (x, k) = if e == 0 { (self.v[0], 0) } else { (self.v[n - 1], n - 1) };
+        let k = self.end_index(e);
+        let x = self.v[k];
         let m = n.min(4);
         let inner: DVec3 = if e == 0 { self.v[..m].iter().sum::<DVec3>() } else { self.v[n - m..].iter().sum::<DVec3>() } / m as f64;
         let t = (x - inner).normalize_or_zero();
@@ -72,7 +83,7 @@ pub struct CompleteParams {
     pub aperture_deg: f64,
     /// Curves shorter than this many steps with two free ends are dropped.
     pub min_steps: f64,
-    /// Laplacian smoothing passes.
+    /// Relaxation passes (each a Taubin pair, see `laplacian`).
     pub smooth_passes: usize,
     /// Edge points this close to a corner were projected from neighbourhoods that reach a third
     /// surface and are biased: curve vertices within it are replaced by a straight run into the
@@ -235,7 +246,7 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams) {
                 if attached || t == DVec3::ZERO {
                     continue;
                 }
-                let own_end = if e == 0 { 0 } else { curves[ci].v.len() - 1 };
+                let own_end = curves[ci].end_index(e);
                 // Nearest vertex ahead, of any curve (the lowest curve, then vertex, on a tie);
                 // on its own curve only the other end.
                 let mut best: Option<(f64, usize, usize)> = None;
@@ -404,7 +415,7 @@ fn resolve_corners(curves: &mut [Curve], zone: f64) {
             continue;
         }
         for e in 0..2 {
-            let k = if e == 0 { 0 } else { c.v.len() - 1 };
+            let k = c.end_index(e);
             if c.corner[k] {
                 at.entry(key(c.v[k])).or_default().push((ci, e));
             }
@@ -428,9 +439,8 @@ fn resolve_corners(curves: &mut [Curve], zone: f64) {
             continue;
         }
         for &(ci, e) in &ends {
-            let c = &mut curves[ci];
-            let k = if e == 0 { 0 } else { c.v.len() - 1 };
-            c.v[k] = solved;
+            let k = curves[ci].end_index(e);
+            curves[ci].v[k] = solved;
         }
         for (ci, e) in straight {
             trim_zone(&mut curves[ci], e, zone);
@@ -442,8 +452,8 @@ fn resolve_corners(curves: &mut [Curve], zone: f64) {
 /// between one and two `zone`s from the corner, if the curve runs straight from one to three
 /// zones out: no vertex there farther than a tenth of the zone from the chord.
 fn line_out_of_zone(c: &Curve, e: usize, q: DVec3, zone: f64) -> Option<(DVec3, DVec3)> {
-    let inward: Box<dyn Iterator<Item = &DVec3>> = if e == 0 { Box::new(c.v.iter()) } else { Box::new(c.v.iter().rev()) };
-    let run: Vec<DVec3> = inward.skip(1).take_while(|v| v.distance(q) < 3.0 * zone).filter(|v| v.distance(q) >= zone).copied().collect();
+    let inward = (1..c.v.len()).map(|k| c.inward(e, k));
+    let run: Vec<DVec3> = inward.take_while(|v| v.distance(q) < 3.0 * zone).filter(|v| v.distance(q) >= zone).collect();
     let (&first, &last) = (run.first()?, run.last()?);
     let chord = (last - first).normalize_or_zero();
     let off = |v: &DVec3| (*v - first).reject_from_normalized(chord).length();
