@@ -13,8 +13,12 @@ pub struct Index {
 
 impl Index {
     /// Builds the tree over `points` (indices into this slice are what queries return).
+    ///
+    /// The build is serial: trees are built on the tile loader thread while the rayon pool
+    /// computes the tile before, and kiddo's parallel build (the default from 262 144
+    /// points) would queue behind that work instead of overlapping it.
     pub fn new(points: &[[f32; 3]]) -> Index {
-        let tree = ImmutableKdTree::new_from_slice(points).expect("k-d tree construction");
+        let tree = ImmutableKdTree::builder().with_serial_construction().build_from_slice(points).expect("k-d tree construction");
         Index { tree }
     }
 
