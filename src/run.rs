@@ -349,23 +349,42 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         let budget = (opts.memory / 4 / 48) as usize;
         let mut b = Bucketer::new(&manifest.grid, &store, budget);
         let bar = progress.bar("bucketing", manifest.declared_points, "points");
-        let mut chunk = PointChunk::default();
         let mut gids = Vec::new();
-        for (fi, f) in files.iter().enumerate() {
-            let mut r = PointReader::open(f, filter)?;
-            // Global ids: file index in the high bits, record index in the low 40 bits.
-            loop {
-                let n = r.read_chunk(io::DEFAULT_CHUNK, &mut chunk)?;
-                if n == 0 {
-                    break;
+        // The inputs are decoded on a thread of their own, one chunk ahead of the bucketing,
+        // so that decoding overlaps the sorting, compressing and writing of the tiles.
+        let (tx, rx) = crossbeam_channel::bounded::<Result<(usize, PointChunk)>>(0);
+        std::thread::scope(|s| -> Result<()> {
+            // Owning the receiver here drops it on any early return, which stops the reader.
+            let rx = rx;
+            let files = &files;
+            s.spawn(move || {
+                for (fi, f) in files.iter().enumerate() {
+                    let mut r = match PointReader::open(f, filter) {
+                        Ok(r) => r,
+                        Err(e) => return drop(tx.send(Err(e))),
+                    };
+                    loop {
+                        let mut chunk = PointChunk::default();
+                        match r.read_chunk(io::DEFAULT_CHUNK, &mut chunk) {
+                            Ok(0) => break,
+                            Ok(_) if tx.send(Ok((fi, chunk))).is_ok() => {}
+                            Ok(_) => return,
+                            Err(e) => return drop(tx.send(Err(e))),
+                        }
+                    }
                 }
+            });
+            for msg in rx.iter() {
+                let (fi, chunk) = msg?;
+                // Global ids: file index in the high bits, record index in the low 40 bits.
                 gids.clear();
                 gids.extend(chunk.index.iter().map(|&i| ((fi as u64) << 40) | i));
                 b.add(&chunk, &gids)?;
-                bar.inc(n as u64);
+                bar.inc(chunk.len() as u64);
                 check_stop()?;
             }
-        }
+            Ok(())
+        })?;
         b.flush()?;
         store.sync()?;
         bar.finish();
@@ -400,6 +419,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t| load_cloud(&store, &grid, t, halo0, 1.0, seed, kq), |_, (cloud, core)| {
                 use rayon::prelude::*;
                 let sample: Vec<usize> = (0..cloud.len())
+                    .into_par_iter()
                     .filter(|&i| core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed))
                     .collect();
                 cloud.prepare_ordering(sample.len());
@@ -441,10 +461,13 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let rdir = dir.join("resid");
     std::fs::create_dir_all(&rdir).map_err(|e| Error::output(&rdir, e))?;
     let time = tile_pass(&progress, "residuals", &tiles, &rdir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |_, (cloud, core)| {
-        let which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
+        // (The per-point steps around the fits run on the pool too: serial, they left one core
+        // idle for a moment of every tile.)
+        use rayon::prelude::*;
+        let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
         let res = extract::candidates::residuals(&cloud, &which, r.fit_radius);
-        let mut pairs: Vec<(u64, f32)> = which.iter().zip(&res).map(|(&i, &x)| (cloud.gid[i as usize], x)).collect();
-        pairs.sort_unstable_by_key(|p| p.0);
+        let mut pairs: Vec<(u64, f32)> = which.par_iter().zip(&res).map(|(&i, &x)| (cloud.gid[i as usize], x)).collect();
+        pairs.par_sort_unstable_by_key(|p| p.0);
         let mut out = Vec::with_capacity(pairs.len() * 12);
         for (g, x) in pairs {
             out.extend_from_slice(&g.to_le_bytes());
@@ -477,8 +500,10 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let edir = dir.join("edges");
     std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
     let time = tile_pass(&progress, "projection", &tiles, &edir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |t, (cloud, core)| {
+        use rayon::prelude::*;
         let res = residuals_of(t)?;
         let cand: Vec<u32> = (0..cloud.len() as u32)
+            .into_par_iter()
             .filter(|&i| core[cloud.ids[i as usize] as usize])
             .filter(|&i| {
                 let g = cloud.gid[i as usize];
