@@ -92,7 +92,7 @@ const CURVATURE_F: f64 = 10.0;
 /// displacement of this share of the larger inlier threshold (3 RMS) carries across the
 /// bisector between the half-surfaces. With no core, the two fits came out slightly outside
 /// the solid (cube 0.02 dB: mean distance 0.0033 -> 0.0047 dB); with the whole threshold, too
-/// few points were left at high noise (chamfer 0.02 dB recall 0.95 -> 0.90). On ten noisy
+/// few points were left at high noise (chamfer 0.02 dB recall 0.94-0.95 -> 0.89-0.92). On ten noisy
 /// clouds at two seeds, 0.5 gave the best precision and mean distance of 0, 0.5 and 1.
 const CORE_FRACTION: f64 = 0.5;
 /// Rounds of exclusive re-assignment and re-fitting.
