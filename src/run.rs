@@ -17,6 +17,7 @@ use crate::extract::{self, cloud::Cloud, Counts, Params, Resolved, Timings, Worl
 use crate::io::{self, Filter, PointReader};
 use crate::tiles::{within, Bucketer, Grid, Store, TilePoints};
 use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -417,7 +418,6 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             let sdir = dir.join("stats");
             std::fs::create_dir_all(&sdir).map_err(|e| Error::output(&sdir, e))?;
             let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t| load_cloud(&store, &grid, t, halo0, 1.0, seed, kq), |_, (cloud, core)| {
-                use rayon::prelude::*;
                 let sample: Vec<usize> = (0..cloud.len())
                     .into_par_iter()
                     .filter(|&i| core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed))
@@ -463,7 +463,6 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let time = tile_pass(&progress, "residuals", &tiles, &rdir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |_, (cloud, core)| {
         // (The per-point steps around the fits run on the pool too: serial, they left one core
         // idle for a moment of every tile.)
-        use rayon::prelude::*;
         let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
         let res = extract::candidates::residuals(&cloud, &which, r.fit_radius);
         let mut pairs: Vec<(u64, f32)> = which.par_iter().zip(&res).map(|(&i, &x)| (cloud.gid[i as usize], x)).collect();
@@ -500,7 +499,6 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let edir = dir.join("edges");
     std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
     let time = tile_pass(&progress, "projection", &tiles, &edir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |t, (cloud, core)| {
-        use rayon::prelude::*;
         let res = residuals_of(t)?;
         let cand: Vec<u32> = (0..cloud.len() as u32)
             .into_par_iter()

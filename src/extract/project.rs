@@ -185,11 +185,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
 /// planes at the same unoriented angle; the half-surface directions tell them apart.
 fn crease_angle(e: DVec3, a: &Quadric, b: &Quadric) -> f64 {
     let t = a.normal(e).cross(b.normal(e)).normalize_or_zero();
-    let side = |c: DVec3| {
-        let d = c - e;
-        (d - t * d.dot(t)).normalize_or_zero()
-    };
-    let (da, db) = (side(a.frame.o), side(b.frame.o));
+    let (da, db) = (across(a.frame.o, e, t).normalize_or_zero(), across(b.frame.o, e, t).normalize_or_zero());
     if da == DVec3::ZERO || db == DVec3::ZERO {
         return 0.0;
     }
@@ -352,16 +348,20 @@ struct Sides {
 impl Sides {
     /// True if `q` lies within the core around the intersection.
     fn in_core(&self, q: DVec3) -> bool {
-        let d = q - self.e;
-        (d - self.t * d.dot(self.t)).length_squared() <= self.w * self.w
+        across(q, self.e, self.t).length_squared() <= self.w * self.w
     }
 
     /// True if `q` lies nearer (in angle about the intersection) to the first half-surface.
     fn prefers_first(&self, q: DVec3) -> bool {
-        let d = q - self.e;
-        let v = d - self.t * d.dot(self.t);
+        let v = across(q, self.e, self.t);
         v.dot(self.da) >= v.dot(self.db)
     }
+}
+
+/// The part of `p - e` across the line through `e` with unit direction `t`.
+fn across(p: DVec3, e: DVec3, t: DVec3) -> DVec3 {
+    let d = p - e;
+    d - t * d.dot(t)
 }
 
 /// The intersection of surfaces `a` and `b` nearest to `x`, with its core: a point of a at
@@ -370,11 +370,7 @@ impl Sides {
 fn half_surfaces(a: &Surface, b: &Surface, x: DVec3, tol: f64) -> Option<Sides> {
     let e = project_to_intersection(x, &a.quad, &b.quad, tol)?;
     let t = a.quad.normal(e).cross(b.quad.normal(e)).normalize_or_zero();
-    let side = |c: DVec3| {
-        let d = c - e;
-        (d - t * d.dot(t)).normalize_or_zero()
-    };
-    let (da, db) = (side(a.quad.frame.o), side(b.quad.frame.o));
+    let (da, db) = (across(a.quad.frame.o, e, t).normalize_or_zero(), across(b.quad.frame.o, e, t).normalize_or_zero());
     let c = da.dot(db).clamp(-1.0, 1.0);
     // tan(angle / 2) = sin / (1 + cos).
     let w = CORE_FRACTION * a.threshold.max(b.threshold) * (1.0 + c) / (1.0 - c * c).sqrt().max(1e-3);
