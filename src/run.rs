@@ -417,7 +417,11 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             let halo0 = 24.0 * kappa0;
             let sdir = dir.join("stats");
             std::fs::create_dir_all(&sdir).map_err(|e| Error::output(&sdir, e))?;
-            let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t| load_cloud(&store, &grid, t, halo0, 1.0, seed, kq), |_, (cloud, core)| {
+            // (The pool has little to do here but wait for the next tile, so the tile is indexed
+            // on the pool, not on the loader thread as in the passes below.)
+            let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t| load(&store, &grid, t, halo0, 1.0, seed, kq), |_, (tp, core)| {
+                let cloud = Cloud::with_origin_parallel(&tp.xyz, &tp.gid, tile_origin(&tp));
+                drop(tp);
                 let sample: Vec<usize> = (0..cloud.len())
                     .into_par_iter()
                     .filter(|&i| core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed))

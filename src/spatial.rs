@@ -22,6 +22,13 @@ impl Index {
         Index { tree }
     }
 
+    /// As [`Index::new`], but large trees are built in parallel on the rayon pool: for callers
+    /// whose pool would otherwise wait for the tree. The tree is the same.
+    pub fn new_parallel(points: &[[f32; 3]]) -> Index {
+        let tree = ImmutableKdTree::builder().build_from_slice(points).expect("k-d tree construction");
+        Index { tree }
+    }
+
     /// Appends to `out` the index and squared distance of every point within `radius` of `q`,
     /// in no particular order.
     #[inline]

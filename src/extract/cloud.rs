@@ -48,6 +48,17 @@ impl Cloud {
 
     /// Builds a cloud from world positions and their global ids, with a given origin.
     pub fn with_origin(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
+        Cloud::build(world, gids, origin, false)
+    }
+
+    /// As [`Cloud::with_origin`], with the sort and the tree built on the rayon pool (for a
+    /// caller whose pool has nothing else to do meanwhile). The cloud is the same.
+    pub fn with_origin_parallel(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
+        Cloud::build(world, gids, origin, true)
+    }
+
+    fn build(world: &[DVec3], gids: &[u64], origin: DVec3, parallel: bool) -> Cloud {
+        use rayon::prelude::*;
         let ext = world.iter().fold(0.0f64, |m, p| m.max((*p - origin).max_element()));
         let q = if ext > 0.0 { ((1u64 << 21) - 1) as f64 / ext } else { 0.0 };
         let code = |p: DVec3| {
@@ -55,12 +66,16 @@ impl Cloud {
             spread(l.x as u64) | spread(l.y as u64) << 1 | spread(l.z as u64) << 2
         };
         let mut order: Vec<(u64, u32)> = world.iter().enumerate().map(|(i, p)| (code(*p), i as u32)).collect();
-        order.sort_unstable();
+        if parallel {
+            order.par_sort_unstable();
+        } else {
+            order.sort_unstable();
+        }
         let ids: Vec<u32> = order.iter().map(|o| o.1).collect();
         let pos: Vec<DVec3> = ids.iter().map(|&i| world[i as usize] - origin).collect();
         let points: Vec<[f32; 3]> = pos.iter().map(|p| p.as_vec3().to_array()).collect();
         let gid: Vec<u64> = ids.iter().map(|&i| gids[i as usize]).collect();
-        let index = Index::new(&points);
+        let index = if parallel { Index::new_parallel(&points) } else { Index::new(&points) };
         Cloud { origin, points, pos, ids, gid, index, rank: std::sync::OnceLock::new() }
     }
 
