@@ -504,14 +504,21 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
     let time = tile_pass(&progress, "projection", &tiles, &edir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |t, (cloud, core)| {
         let res = residuals_of(t)?;
-        let cand: Vec<u32> = (0..cloud.len() as u32)
-            .into_par_iter()
-            .filter(|&i| core[cloud.ids[i as usize] as usize])
-            .filter(|&i| {
-                let g = cloud.gid[i as usize];
-                res.binary_search_by_key(&g, |p| p.0).map_or(false, |k| res[k].1 as f64 > tau)
-            })
-            .collect();
+        // The core points' residuals, joined by global id (both sides sorted by it: a binary
+        // search per point cost more than the sort).
+        let mut core_ids: Vec<(u64, u32)> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).map(|i| (cloud.gid[i as usize], i)).collect();
+        core_ids.par_sort_unstable();
+        let mut cand = Vec::new();
+        let mut k = 0;
+        for (g, i) in core_ids {
+            while k < res.len() && res[k].0 < g {
+                k += 1;
+            }
+            if k < res.len() && res[k].0 == g && res[k].1 as f64 > tau {
+                cand.push(i);
+            }
+        }
+        cand.par_sort_unstable();
         if let Ok(d) = std::env::var("CREASE_DEBUG_DIR") {
             let pts: Vec<DVec3> = cand.iter().map(|&i| cloud.at(i as usize)).collect();
             extract::debug_dump(&d, &format!("candidates_{t}.obj"), &pts, cloud.origin);

@@ -320,8 +320,9 @@ fn refine(surfs: &mut [Surface], pts: &[DVec3], x: DVec3, min_threshold: f64, to
         if members == previous {
             break;
         }
-        for (sf, m) in surfs.iter_mut().zip(&members) {
-            if m.len() < 6 {
+        for ((sf, m), was) in surfs.iter_mut().zip(&members).zip(&previous) {
+            // (Points unchanged since the last round: the fit would come out the same.)
+            if m.len() < 6 || m == was {
                 continue;
             }
             let Some((q, rms)) = fit_surface(pts, m, sf.quad.frame.n, min_threshold) else { continue };
