@@ -1,6 +1,8 @@
 //! Bad input: every case exits with code 2 and one line naming the file and the problem,
 //! never a panic.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -183,6 +185,5 @@ fn valid_small_files_still_read() {
 }
 
 fn shared(name: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real").join(name);
-    p.exists().then_some(p)
+    common::shared_data(&format!("real/{name}"))
 }

@@ -1,6 +1,8 @@
 //! Extraction quality against ground truth on the committed fixtures, the angle sweep, and
 //! determinism across thread counts. Larger (500 k-point) runs live in scripts/quality.sh.
 
+mod common;
+
 use crease::curves::{read_obj, Polyline};
 use crease::eval::{evaluate, EvalOptions, Scores};
 use crease::extract::{extract, Params};
@@ -81,11 +83,7 @@ fn sampled_mesh() {
 /// whatever their curve's length). Skipped without `../shared/data/meshes`.
 #[test]
 fn noisy_sampled_mesh() {
-    let off = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/meshes/anchor.off");
-    if !off.exists() {
-        eprintln!("skipping: {} not found", off.display());
-        return;
-    }
+    let Some(off) = common::shared_data("meshes/anchor.off") else { return };
     let d = tempfile::tempdir().unwrap();
     let (las, out) = (d.path().join("anchor.las"), d.path().join("out"));
     let crease = |args: &[&str]| {

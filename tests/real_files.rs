@@ -1,16 +1,12 @@
 //! Reader tests on the real LAS/LAZ files in `../shared/data/real` (skipped when absent).
 
+mod common;
+
 use crease::io::{read_header, scan_bounds, PointReader, Filter};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 fn real_dir() -> Option<PathBuf> {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real");
-    if d.is_dir() {
-        Some(d)
-    } else {
-        eprintln!("skipping: {} not found", d.display());
-        None
-    }
+    common::shared_data("real")
 }
 
 /// Every file: the header count equals the number of records read, and the header bounds equal

@@ -1,11 +1,12 @@
 //! Ground-truth generation: shapes, mesh sampling, scene, determinism and the noise model.
 
+mod common;
+
 use crease::curves::read_obj;
 use crease::io::{read_header, Filter, PointReader};
 use crease::synth::{self, shapes::shape, Sampling, SynthOptions};
 use glam::DVec3;
 use std::collections::HashSet;
-use std::path::Path;
 
 fn opts(n: usize, noise: f64, seed: u64) -> SynthOptions {
     SynthOptions { n, noise, outliers: 0.0, sampling: Sampling::Uniform, seed }
@@ -90,11 +91,7 @@ fn same_seed_same_bytes() {
 /// than 30 degrees, and compare with the truth polylines' segments.
 #[test]
 fn mesh_truth_is_exactly_the_sharp_edges() {
-    let off = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/meshes/anchor.off");
-    if !off.exists() {
-        eprintln!("skipping: {} not found", off.display());
-        return;
-    }
+    let Some(off) = common::shared_data("meshes/anchor.off") else { return };
     let text = std::fs::read_to_string(&off).unwrap();
     let nums: Vec<f64> = text.split_whitespace().skip(1).map(|t| t.parse().unwrap()).collect();
     let (nv, nf) = (nums[0] as usize, nums[1] as usize);
