@@ -339,7 +339,7 @@ fn crease_split(pts: &[DVec3], members: &[usize], q: &Quadric, rss: f64) -> Opti
             continue;
         }
         let ((na, ra), (nb, rb)) = (plane(0, k), plane(k, n));
-        if best.as_ref().map_or(true, |b| ra + rb < b.0) {
+        if best.as_ref().is_none_or(|b| ra + rb < b.0) {
             best = Some((ra + rb, k, na, nb));
         }
     }
