@@ -145,21 +145,30 @@ impl Cloud {
 
     fn ranks(&self) -> Vec<u32> {
         use rayon::prelude::*;
-        // Sorted by value, not through the index: the keys order exactly as
-        // `coordinate_order` does, and comparing them in place is several times cheaper.
-        let mut order: Vec<([i64; 3], u64, u32)> = (0..self.len()).into_par_iter().map(|i| (self.pos[i].to_array().map(total_order_key), self.gid[i], i as u32)).collect();
+        // Sorted by value, not through the index: comparing the keys in place is several
+        // times cheaper.
+        let mut order: Vec<(([i64; 3], u64), u32)> = (0..self.len() as u32).into_par_iter().map(|i| (self.order_key(i), i)).collect();
         order.par_sort_unstable();
         let mut rank = vec![0u32; order.len()];
         for (k, o) in order.iter().enumerate() {
-            rank[o.2 as usize] = k as u32;
+            rank[o.1 as usize] = k as u32;
         }
         rank
     }
 
+    /// Point `i`'s key in coordinate order: x, then y, then z (as `f64::total_cmp` orders
+    /// them), then global id.
+    fn order_key(&self, i: u32) -> ([i64; 3], u64) {
+        let key = |x: f64| {
+            let b = x.to_bits() as i64;
+            b ^ (((b >> 63) as u64) >> 1) as i64
+        };
+        (self.pos[i as usize].to_array().map(key), self.gid[i as usize])
+    }
+
     /// Points by x, then y, then z, then global id.
     fn coordinate_order(&self, a: u32, b: u32) -> std::cmp::Ordering {
-        let (p, q) = (self.pos[a as usize], self.pos[b as usize]);
-        p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(self.gid[a as usize].cmp(&self.gid[b as usize]))
+        self.order_key(a).cmp(&self.order_key(b))
     }
 
     /// Neighbours in coordinate order: every fit, subsample and choice over them is then the
@@ -275,12 +284,6 @@ impl Cloud {
     }
 }
 
-/// An integer that orders as `f64::total_cmp` orders the floats (the same transform).
-fn total_order_key(x: f64) -> i64 {
-    let b = x.to_bits() as i64;
-    b ^ (((b >> 63) as u64) >> 1) as i64
-}
-
 /// Most points taken together by [`Cloud::map_neighbourhoods`] (a dense cell is split).
 const MAX_BLOCK: usize = 64;
 
@@ -331,6 +334,12 @@ mod tests {
         assert_eq!(ids(&plain), ids(&ranked));
         for b in &plain {
             assert!(b.windows(2).all(|w| cloud.coordinate_order(w[0].0, w[1].0).is_lt()));
+            // (The order itself, spelled out with total_cmp.)
+            let by_cmp = |i: u32, j: u32| {
+                let (p, q) = (cloud.pos[i as usize], cloud.pos[j as usize]);
+                p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(cloud.gid[i as usize].cmp(&cloud.gid[j as usize]))
+            };
+            assert!(b.windows(2).all(|w| by_cmp(w[0].0, w[1].0).is_lt()));
         }
     }
 }
