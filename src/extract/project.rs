@@ -15,7 +15,6 @@ use super::cloud::{Cloud, Neighbourhood};
 use super::fit::{project_to_corner, project_to_intersection, Frame, Pca, Quadric};
 use crate::synth::rng::Rng;
 use glam::DVec3;
-use nalgebra::Matrix3;
 
 /// A candidate projected onto the intersection of two surfaces.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -311,26 +310,10 @@ fn crease_split(pts: &[DVec3], members: &[usize], q: &Quadric, rss: f64) -> Opti
         .collect();
     by.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
     let n = by.len();
-    // Prefix moments of the positions relative to the frame's origin.
-    let mut m1 = vec![DVec3::ZERO; n + 1];
-    let mut m2 = vec![[0.0f64; 6]; n + 1];
-    for (k, &(_, j)) in by.iter().enumerate() {
-        let d = pts[j] - q.frame.o;
-        m1[k + 1] = m1[k] + d;
-        let o = [d.x * d.x, d.x * d.y, d.x * d.z, d.y * d.y, d.y * d.z, d.z * d.z];
-        m2[k + 1] = std::array::from_fn(|i| m2[k][i] + o[i]);
-    }
     // The plane through the sorted points lo..hi: its normal and residual sum of squares.
     let plane = |lo: usize, hi: usize| {
-        let w = (hi - lo) as f64;
-        let mean = (m1[hi] - m1[lo]) / w;
-        let s2: [f64; 6] = std::array::from_fn(|i| (m2[hi][i] - m2[lo][i]) / w);
-        let (xy, xz, yz) = (s2[1] - mean.x * mean.y, s2[2] - mean.x * mean.z, s2[4] - mean.y * mean.z);
-        let cov = Matrix3::new(s2[0] - mean.x * mean.x, xy, xz, xy, s2[3] - mean.y * mean.y, yz, xz, yz, s2[5] - mean.z * mean.z);
-        let e = cov.symmetric_eigen();
-        let k = e.eigenvalues.imin();
-        let v = e.eigenvectors.column(k);
-        (DVec3::new(v[0], v[1], v[2]).normalize_or_zero(), e.eigenvalues[k].max(0.0) * w)
+        let pca = Pca::of(by[lo..hi].iter().map(|&(_, j)| (pts[j], 1.0))).expect("points");
+        (pca.normal(), pca.values[2] * (hi - lo) as f64)
     };
     let mut best: Option<(f64, usize, DVec3, DVec3)> = None;
     for tenth in 2..=8 {
