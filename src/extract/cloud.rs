@@ -193,10 +193,8 @@ impl Cloud {
     }
 
     /// Runs `f` on the neighbourhood (as [`Cloud::neighbours_in`] gives it) of every point in
-    /// `which`, in parallel, returning the results in the order of `which`. The points are
-    /// taken in blocks, those in one cell of a grid whose cells are as wide as the ball: one
-    /// tree query around a block, wide enough for all its points, then each point's ball is cut
-    /// from that list. This gives the same sets as a query per point at a fraction of the cost.
+    /// `which`, in parallel, returning the results in the order of `which` (see
+    /// [`Cloud::map_neighbourhoods_at`]).
     pub fn map_neighbourhoods<T: Send, S>(
         &self,
         which: &[u32],
@@ -204,15 +202,32 @@ impl Cloud {
         init: impl Fn() -> S + Sync + Send,
         f: impl Fn(&mut S, u32, &[(u32, f32)]) -> T + Sync + Send,
     ) -> Vec<T> {
+        let at: Vec<DVec3> = which.iter().map(|&i| self.pos[i as usize]).collect();
+        self.map_neighbourhoods_at(&at, nb, init, |s, k, buf| f(s, which[k as usize], buf))
+    }
+
+    /// Runs `f` on the neighbourhood (as [`Cloud::neighbours_in`] gives it) of every local
+    /// position in `at`, in parallel, passing its index in `at` and returning the results in
+    /// that order. The positions are taken in blocks, those in one cell of a grid whose cells
+    /// are as wide as the ball: one tree query around a block, wide enough for all its
+    /// positions, then each position's ball is cut from that list. This gives the same sets as
+    /// a query per position at a fraction of the cost.
+    pub fn map_neighbourhoods_at<T: Send, S>(
+        &self,
+        at: &[DVec3],
+        nb: Neighbourhood,
+        init: impl Fn() -> S + Sync + Send,
+        f: impl Fn(&mut S, u32, &[(u32, f32)]) -> T + Sync + Send,
+    ) -> Vec<T> {
         use rayon::prelude::*;
         let Neighbourhood { radius: r, min, max, ordered } = nb;
         if ordered {
-            self.prepare_ordering(which.len());
+            self.prepare_ordering(at.len());
         }
-        let cell = |i: u32| (self.pos[i as usize] / r).floor().as_i64vec3().to_array();
-        let mut order: Vec<([i64; 3], u32, u32)> = which.iter().enumerate().map(|(k, &i)| (cell(i), k as u32, i)).collect();
+        let cell = |q: DVec3| (q / r).floor().as_i64vec3().to_array();
+        let mut order: Vec<([i64; 3], u32)> = at.iter().enumerate().map(|(k, &q)| (cell(q), k as u32)).collect();
         order.par_sort_unstable();
-        let mut blocks: Vec<&[([i64; 3], u32, u32)]> = Vec::new();
+        let mut blocks: Vec<&[([i64; 3], u32)]> = Vec::new();
         let mut rest = &order[..];
         while !rest.is_empty() {
             let n = rest.iter().take(MAX_BLOCK).take_while(|o| o.0 == rest[0].0).count();
@@ -224,8 +239,8 @@ impl Cloud {
             .map_init(
                 || (init(), Vec::new(), Vec::new(), Vec::new(), Vec::new()),
                 |(state, block, bpos, out, d2s), chunk| {
-                    let c = chunk.iter().map(|o| self.pos[o.2 as usize]).sum::<DVec3>() / chunk.len() as f64;
-                    let b = chunk.iter().map(|o| self.pos[o.2 as usize].distance(c)).fold(0.0, f64::max);
+                    let c = chunk.iter().map(|o| at[o.1 as usize]).sum::<DVec3>() / chunk.len() as f64;
+                    let b = chunk.iter().map(|o| at[o.1 as usize].distance(c)).fold(0.0, f64::max);
                     let blocked = b <= r;
                     if blocked {
                         block.clear();
@@ -236,11 +251,11 @@ impl Cloud {
                     }
                     chunk
                         .iter()
-                        .map(|&(_, k, i)| {
-                            let q = self.pos[i as usize];
+                        .map(|&(_, k)| {
+                            let q = at[k as usize];
                             if !blocked {
                                 self.neighbours_in(q, r, min, max, ordered, out);
-                                return (k, f(state, i, out));
+                                return (k, f(state, k, out));
                             }
                             // The block list holds every point within `reach` of q.
                             out.clear();
@@ -268,11 +283,11 @@ impl Cloud {
                                     out.truncate(min);
                                 } else {
                                     self.neighbours_in(q, r, min, max, ordered, out);
-                                    return (k, f(state, i, out));
+                                    return (k, f(state, k, out));
                                 }
                             }
                             self.order_and_thin(max, ordered, out);
-                            (k, f(state, i, out))
+                            (k, f(state, k, out))
                         })
                         .collect::<Vec<_>>()
                 },
