@@ -419,7 +419,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             std::fs::create_dir_all(&sdir).map_err(|e| Error::output(&sdir, e))?;
             // (The pool has little to do here but wait for the next tile, so the tile is indexed
             // on the pool, not on the loader thread as in the passes below.)
-            let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t| load(&store, &grid, t, halo0, 1.0, seed, kq), |_, (tp, core)| {
+            let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t, _| load(&store, &grid, t, halo0, 1.0, seed, kq), |_, (tp, core)| {
                 let cloud = Cloud::with_origin_parallel(&tp.xyz, &tp.gid, tile_origin(&tp));
                 drop(tp);
                 let sample: Vec<usize> = (0..cloud.len())
@@ -464,7 +464,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let t = Instant::now();
     let rdir = dir.join("resid");
     std::fs::create_dir_all(&rdir).map_err(|e| Error::output(&rdir, e))?;
-    let time = tile_pass(&progress, "residuals", &tiles, &rdir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |_, (cloud, core)| {
+    let time = tile_pass(&progress, "residuals", &tiles, &rdir, |t, idle| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq, idle), |_, (cloud, core)| {
         // (The per-point steps around the fits run on the pool too: serial, they left one core
         // idle for a moment of every tile.)
         let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
@@ -486,14 +486,11 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         let b = read_result(&rdir, t)?;
         Ok(b.chunks_exact(12).map(|c| (u64::from_le_bytes(c[..8].try_into().unwrap()), f32::from_le_bytes(c[8..].try_into().unwrap()))).collect())
     };
-    let mut per_tile_sums = vec![];
-    for &t in &tiles {
-        let v = residuals_of(t)?;
-        per_tile_sums.push(v.iter().map(|p| p.1 as f64).sum::<f64>());
-        count += v.len() as u64;
-    }
-    for s in per_tile_sums {
+    // (Read on the pool, which is idle here; the sums are added in tile order.)
+    let per_tile: Vec<(f64, u64)> = tiles.par_iter().map(|&t| residuals_of(t).map(|v| (v.iter().map(|p| p.1 as f64).sum::<f64>(), v.len() as u64))).collect::<Result<_>>()?;
+    for (s, n) in per_tile {
         sum += s;
+        count += n;
     }
     let tau = params.tau.unwrap_or(sum / count.max(1) as f64);
     pass.residuals = t.elapsed().as_secs_f64();
@@ -502,7 +499,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let t = Instant::now();
     let edir = dir.join("edges");
     std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
-    let time = tile_pass(&progress, "projection", &tiles, &edir, |t| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq), |t, (cloud, core)| {
+    let time = tile_pass(&progress, "projection", &tiles, &edir, |t, idle| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq, idle), |t, (cloud, core)| {
         let res = residuals_of(t)?;
         // The core points' residuals, joined by global id (both sides sorted by it: a binary
         // search per point cost more than the sort).
@@ -644,10 +641,14 @@ fn tile_origin(tp: &TilePoints) -> DVec3 {
     tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
 }
 
-/// Loads tile `t` with its halo (see [`load`]) and indexes it.
-fn load_cloud(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64, kq: f64) -> Result<(Cloud, Vec<bool>)> {
+/// Loads tile `t` with its halo (see [`load`]) and indexes it, on the rayon pool if `idle`
+/// says that the pool has nothing else to do (the same cloud either way).
+#[allow(clippy::too_many_arguments)]
+fn load_cloud(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64, kq: f64, idle: bool) -> Result<(Cloud, Vec<bool>)> {
     let (tp, core) = load(store, grid, t, halo, keep, seed, kq)?;
-    Ok((Cloud::with_origin(&tp.xyz, &tp.gid, tile_origin(&tp)), core))
+    let origin = tile_origin(&tp);
+    let cloud = if idle { Cloud::with_origin_parallel(&tp.xyz, &tp.gid, origin) } else { Cloud::with_origin(&tp.xyz, &tp.gid, origin) };
+    Ok((cloud, core))
 }
 
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by id hash); the
@@ -696,7 +697,7 @@ fn tile_pass<T: Send>(
     name: &str,
     tiles: &[u32],
     dir: &Path,
-    load: impl Fn(u32) -> Result<T> + Sync,
+    load: impl Fn(u32, bool) -> Result<T> + Sync,
     compute: impl Fn(u32, T) -> Result<Vec<u8>> + Sync,
 ) -> Result<PassTime> {
     let todo: Vec<u32> = tiles.iter().copied().filter(|&t| !result_path(dir, t).exists()).collect();
@@ -712,12 +713,14 @@ fn tile_pass<T: Send>(
         let rx = rx;
         let loader = s.spawn(move || {
             let mut secs = 0.0;
-            for &t in todo {
+            for (k, &t) in todo.iter().enumerate() {
                 if STOP.load(Ordering::SeqCst) {
                     break;
                 }
                 let t0 = Instant::now();
-                let x = load(t);
+                // (The first tile is loaded while the pool waits for it; later ones while
+                // the pool computes the tile before.)
+                let x = load(t, k == 0);
                 secs += t0.elapsed().as_secs_f64();
                 if tx.send((t, x)).is_err() {
                     break;
