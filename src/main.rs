@@ -119,7 +119,7 @@ enum Cmd {
         #[arg(long)]
         threads: Option<usize>,
         /// Memory budget, e.g. 1G or 512M (default: half of the machine's memory); sets the
-        /// tile size.
+        /// tile size (at most about 2 M points a tile).
         #[arg(long, value_parser = parse_size)]
         memory: Option<u64>,
         /// Tile edge length in model units (overrides the size derived from --memory).
