@@ -13,7 +13,7 @@
 use crate::cloud::{Bounds, CloudHeader, Crs, PointChunk};
 use crate::curves::{write_geojson, write_obj, write_ply};
 use crate::error::{Error, Result};
-use crate::extract::{self, cloud::Cloud, Counts, Params, Resolved, Timings, WorldCorner, WorldEdge};
+use crate::extract::{self, candidates::ResidualSum, cloud::Cloud, Counts, Params, Resolved, Timings, WorldCorner, WorldEdge};
 use crate::io::{self, Filter, PointReader};
 use crate::tiles::{within, Bucketer, Grid, Store, TilePoints};
 use glam::{DVec3, Vec3};
@@ -425,18 +425,10 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             std::fs::create_dir_all(&sdir).map_err(|e| Error::output(&sdir, e))?;
             // (The pool has little to do here but wait for the next tile, so the tile is indexed
             // on the pool, not on the loader thread as in the passes below.)
-            let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t, _| load(&store, &grid, t, halo0, 1.0, seed, kq), |_, (tp, core)| {
-                let cloud = Cloud::with_origin_parallel(&tp.xyz, &tp.gid, tile_origin(&tp));
-                drop(tp);
-                let sample: Vec<usize> = (0..cloud.len())
-                    .into_par_iter()
-                    .filter(|&i| core[cloud.ids[i] as usize] && extract::stat_sample(extract::position_key(cloud.at(i) + cloud.origin, kq), total, seed))
-                    .collect();
-                cloud.prepare_ordering(sample.len());
-                let stats: Vec<Option<(f64, f64, f64)>> =
-                    sample.par_iter().map_init(Vec::new, |buf, &i| extract::point_stats(&cloud, i, buf)).collect();
+            let time = tile_pass(&progress, "statistics", &tiles, &sdir, |t, _| load(&store, &grid, t, halo0, 1.0, seed, kq), |t, first| {
+                let stats = tile_statistics(&store, &grid, t, first, halo0, kq, total, seed)?;
                 let mut out: Vec<u8> = Vec::new();
-                for s in stats.into_iter().flatten() {
+                for s in stats {
                     for v in [s.0, s.1, s.2] {
                         out.extend_from_slice(&v.to_le_bytes());
                     }
@@ -463,8 +455,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     };
     pass.statistics = t.elapsed().as_secs_f64();
     let r = resolved;
-    // The halo covers the widest neighbourhood of stages 1-2 with a margin.
-    let halo = 1.25 * r.fit_radius.max(r.rmls_radius);
+    let halo = r.halo();
 
     // Residual pass.
     let t = Instant::now();
@@ -474,7 +465,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         // (The per-point steps around the fits run on the pool too: serial, they left one core
         // idle for a moment of every tile.)
         let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
-        let res = extract::candidates::residuals(&cloud, &which, r.fit_radius);
+        let res = extract::candidates::residuals(&cloud, &which, r.fit_radius, halo);
         let mut pairs: Vec<(u64, f32)> = which.par_iter().zip(&res).map(|(&i, &x)| (cloud.gid[i as usize], x)).collect();
         pairs.par_sort_unstable_by_key(|p| p.0);
         let mut out = Vec::with_capacity(pairs.len() * 12);
@@ -485,20 +476,15 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         Ok(out)
     })?;
     pass.residuals_load = time.load;
-    // tau: the mean residual over all points (summed in tile order, in f64).
-    let mut sum = 0.0f64;
-    let mut count = 0u64;
+    // tau: the mean residual over all points (an exact sum: the same whatever the tiling).
     let residuals_of = |t: u32| -> Result<Vec<(u64, f32)>> {
         let b = read_result(&rdir, t)?;
         Ok(b.chunks_exact(12).map(|c| (u64::from_le_bytes(c[..8].try_into().unwrap()), f32::from_le_bytes(c[8..].try_into().unwrap()))).collect())
     };
-    // (Read on the pool, which is idle here; the sums are added in tile order.)
-    let per_tile: Vec<(f64, u64)> = tiles.par_iter().map(|&t| residuals_of(t).map(|v| (v.iter().map(|p| p.1 as f64).sum::<f64>(), v.len() as u64))).collect::<Result<_>>()?;
-    for (s, n) in per_tile {
-        sum += s;
-        count += n;
-    }
-    let tau = params.tau.unwrap_or(sum / count.max(1) as f64);
+    // (Read on the pool, which is idle here.)
+    let per_tile: Vec<ResidualSum> = tiles.par_iter().map(|&t| residuals_of(t).map(|v| ResidualSum::of(v.iter().map(|p| p.1)))).collect::<Result<_>>()?;
+    let total = per_tile.into_iter().fold(ResidualSum::default(), ResidualSum::add);
+    let tau = params.tau.unwrap_or(extract::settle(total.mean()));
     pass.residuals = t.elapsed().as_secs_f64();
 
     // Projection pass.
@@ -548,7 +534,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         Ok((e, c, n, one))
     };
     // Bounds of each tile's edge points, and all corner points.
-    let mut counts = Counts { points: count, ..Default::default() };
+    let mut counts = Counts { points: total.count(), ..Default::default() };
     let mut boxes: Vec<(u32, DVec3, DVec3)> = vec![];
     let mut corners = vec![];
     for &t in &tiles {
@@ -646,6 +632,70 @@ fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs) -> R
 fn tile_origin(tp: &TilePoints) -> DVec3 {
     tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
 }
+
+/// Statistics (spacing, noise, density: see [`extract::point_stats`]) of the sampled points in
+/// tile `t`'s core, given the tile loaded with halo `halo0`, in global id order.
+///
+/// A sample's neighbourhood is 16 of its own spacings wide, so in a sparse region it can
+/// reach past the halo, and then it would depend on where the tile borders fall. Such samples
+/// are computed again with the tile reloaded with a halo wide enough for them (up to
+/// [`STATS_HALO_GROWTH`] times `halo0`).
+#[allow(clippy::too_many_arguments)]
+fn tile_statistics(store: &Store, grid: &Grid, t: u32, first: (TilePoints, Vec<bool>), halo0: f64, kq: f64, total: u64, seed: u64) -> Result<Vec<(f64, f64, f64)>> {
+    let core = grid.core(t);
+    let cap = STATS_HALO_GROWTH * halo0;
+    let (mut tp, mut is_core) = first;
+    let mut halo = halo0;
+    let mut todo: Option<Vec<u64>> = None;
+    let mut done: Vec<(u64, (f64, f64, f64))> = Vec::new();
+    loop {
+        // (Sampled by world position, read from the store, not rebuilt from the tile's
+        // local coordinates, whose round trip may not be exact.)
+        let sampled: Vec<bool> = tp
+            .xyz
+            .par_iter()
+            .zip(&tp.gid)
+            .zip(&is_core)
+            .map(|((&p, g), &c)| c && extract::stat_sample(extract::position_key(p, kq), total, seed) && todo.as_ref().is_none_or(|v| v.binary_search(g).is_ok()))
+            .collect();
+        let cloud = Cloud::with_origin_parallel(&tp.xyz, &tp.gid, tile_origin(&tp));
+        drop(tp);
+        let sample: Vec<usize> = (0..cloud.len()).into_par_iter().filter(|&i| sampled[cloud.ids[i] as usize]).collect();
+        cloud.prepare_ordering(sample.len());
+        let stats: Vec<Option<(f64, f64, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| extract::point_stats(&cloud, i, buf)).collect();
+        let mut again = Vec::new();
+        let mut need = 0.0f64;
+        for (&i, s) in sample.iter().zip(stats) {
+            // The widest ball the statistics read (the 16-spacing ball, with the margin of the
+            // tree query), or everything for a sample that found too few neighbours.
+            let r = s.map_or(f64::INFINITY, |s| 16.0 * s.0 * (1.0 + 1e-4));
+            let q = cloud.at(i) + cloud.origin;
+            let inside = (0..3).all(|a| (core.min[a] == f64::NEG_INFINITY || q[a] - r >= core.min[a] - halo) && (core.max[a] == f64::INFINITY || q[a] + r < core.max[a] + halo));
+            if inside || halo >= cap {
+                if let Some(s) = s {
+                    done.push((cloud.gid[i], s));
+                }
+            } else {
+                again.push(cloud.gid[i]);
+                need = need.max(r);
+            }
+        }
+        if again.is_empty() {
+            break;
+        }
+        again.sort_unstable();
+        halo = (1.01 * need).max(2.0 * halo).min(cap);
+        (tp, is_core) = load(store, grid, t, halo, 1.0, seed, kq)?;
+        todo = Some(again);
+    }
+    done.sort_unstable_by_key(|d| d.0);
+    Ok(done.into_iter().map(|d| d.1).collect())
+}
+
+/// How much wider than its first halo the statistics pass may reload a tile (see
+/// [`tile_statistics`]). Samples whose neighbourhood is wider still (isolated points) keep
+/// what the widest halo holds.
+const STATS_HALO_GROWTH: f64 = 4.0;
 
 /// Loads tile `t` with its halo (see [`load`]) and indexes it, on the rayon pool if `idle`
 /// says that the pool has nothing else to do (the same cloud either way).

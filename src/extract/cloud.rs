@@ -24,6 +24,24 @@ pub struct Cloud {
     /// (see [`Cloud::prepare_ordering`]): comparing two ranks is far cheaper than comparing
     /// coordinates.
     rank: std::sync::OnceLock<Vec<u32>>,
+    /// How far an f32 distance between two points may be from the f64 one: each local
+    /// coordinate is rounded to f32 by up to 2^-24 of the largest one.
+    slack: f64,
+}
+
+/// The f32 radius that surely finds every point within `r` (in f64) of a query, given the
+/// coordinates' rounding `slack` (see [`Cloud`]): membership is then decided in f64. (A
+/// relative margin alone missed points on the rim in tiles a few hundred metres wide, so a
+/// ball held different points depending on the tile's size.)
+pub fn query_radius(r: f64, slack: f64) -> f32 {
+    (r * (1.0 + 1e-5) + slack) as f32 + f32::EPSILON
+}
+
+/// The rounding slack of f32 coordinates no larger than `extent` in magnitude (see [`Cloud`]):
+/// both ends of a distance may be rounded, by 2^-24 of `extent` on each axis, and 2^-21 of it
+/// bounds that with room to spare.
+pub fn rounding_slack(extent: f64) -> f64 {
+    extent * 2f64.powi(-21)
 }
 
 /// Spreads the low 21 bits of `v` to every third bit.
@@ -76,7 +94,8 @@ impl Cloud {
         let points: Vec<[f32; 3]> = pos.iter().map(|p| p.as_vec3().to_array()).collect();
         let gid: Vec<u64> = ids.iter().map(|&i| gids[i as usize]).collect();
         let index = if parallel { Index::new_parallel(&points) } else { Index::new(&points) };
-        Cloud { origin, points, pos, ids, gid, index, rank: std::sync::OnceLock::new() }
+        let slack = rounding_slack(pos.iter().fold(0.0f64, |m, p| m.max(p.abs().max_element())));
+        Cloud { origin, points, pos, ids, gid, index, rank: std::sync::OnceLock::new(), slack }
     }
 
     /// Number of points.
@@ -95,10 +114,15 @@ impl Cloud {
         self.pos[i]
     }
 
+    /// The f32 radius around local position `q` that surely finds every point within `r`.
+    fn radius32(&self, q: DVec3, r: f64) -> f32 {
+        query_radius(r, self.slack.max(rounding_slack(q.abs().max_element())))
+    }
+
     /// Number of points within `r` of local position `q` (membership decided in f64).
     pub fn count_within(&self, q: DVec3, r: f64, buf: &mut Vec<(u32, f32)>) -> usize {
         buf.clear();
-        self.index.within(&q.as_vec3().to_array(), (r * (1.0 + 1e-5)) as f32 + f32::EPSILON, buf);
+        self.index.within(&q.as_vec3().to_array(), self.radius32(q, r), buf);
         buf.iter().filter(|a| self.pos[a.0 as usize].distance_squared(q) <= r * r).count()
     }
 
@@ -106,17 +130,18 @@ impl Cloud {
     /// `min` nearest where the ball holds fewer (sparse regions of unevenly sampled scans); at
     /// most about `max` of them, an even subsample of the ball when there are more.
     pub fn neighbours(&self, q: DVec3, r: f64, min: usize, max: usize, out: &mut Vec<(u32, f32)>) {
-        self.neighbours_in(q, r, min, max, true, out)
+        self.neighbours_in(q, r, f64::INFINITY, min, max, true, out)
     }
 
-    /// As [`Cloud::neighbours`]; with `ordered` false the points come in the tree's order
-    /// unless they must be subsampled (for order-insensitive uses such as least-squares sums,
-    /// where only the last bits can depend on it).
-    pub fn neighbours_in(&self, q: DVec3, r: f64, min: usize, max: usize, ordered: bool, out: &mut Vec<(u32, f32)>) {
+    /// As [`Cloud::neighbours`], but a sparse neighbourhood is widened no farther than `reach`
+    /// (it may then hold fewer than `min` points). With `ordered` false the points come in the
+    /// tree's order unless they must be subsampled (for order-insensitive uses such as
+    /// least-squares sums, where only the last bits can depend on it).
+    pub fn neighbours_in(&self, q: DVec3, r: f64, reach: f64, min: usize, max: usize, ordered: bool, out: &mut Vec<(u32, f32)>) {
         out.clear();
         // Query the f32 tree a little wide, then decide membership in f64, so the ball holds
         // the same points wherever the tile's origin lies.
-        self.index.within(&q.as_vec3().to_array(), (r * (1.0 + 1e-5)) as f32 + f32::EPSILON, out);
+        self.index.within(&q.as_vec3().to_array(), self.radius32(q, r), out);
         let r2 = r * r;
         out.retain_mut(|a| {
             let d2 = self.pos[a.0 as usize].distance_squared(q);
@@ -127,7 +152,7 @@ impl Cloud {
             out.clear();
             // (A few more than `min` from the f32 tree: the f64 order of the nearest may differ.)
             self.index.nearest_n(&q.as_vec3().to_array(), min + 8, out);
-            self.keep_nearest(q, r, min, out);
+            self.keep_nearest(q, r, reach, min, out);
         }
         self.order_and_thin(max, ordered, out);
     }
@@ -139,13 +164,14 @@ impl Cloud {
     /// `min` in the ball) got different neighbours, and so residuals, in 2 and in 16 tiles.
     /// Distances are compared rounded to a billionth of `r^2`, so that a tie stays a tie
     /// whatever the tile's local origin.
-    fn keep_nearest(&self, q: DVec3, r: f64, min: usize, out: &mut Vec<(u32, f32)>) {
+    fn keep_nearest(&self, q: DVec3, r: f64, reach: f64, min: usize, out: &mut Vec<(u32, f32)>) {
         let quantum = 1e-9 * r * r;
+        let reach = reach.max(r);
         let mut keyed: Vec<((u64, ([i64; 3], u64)), (u32, f32))> = out
             .iter()
-            .map(|&(j, _)| {
+            .filter_map(|&(j, _)| {
                 let d2 = self.pos[j as usize].distance_squared(q);
-                (((d2 / quantum).round() as u64, self.order_key(j)), (j, d2 as f32))
+                (d2 <= reach * reach).then(|| (((d2 / quantum).round() as u64, self.order_key(j)), (j, d2 as f32)))
             })
             .collect();
         let k = min.min(keyed.len());
@@ -243,7 +269,8 @@ impl Cloud {
         f: impl Fn(&mut S, u32, &[(u32, f32)]) -> T + Sync + Send,
     ) -> Vec<T> {
         use rayon::prelude::*;
-        let Neighbourhood { radius: r, min, max, ordered } = nb;
+        let Neighbourhood { radius: r, reach: cap, min, max, ordered } = nb;
+        let cap = cap.max(r);
         if ordered {
             self.prepare_ordering(at.len());
         }
@@ -267,7 +294,7 @@ impl Cloud {
                     let blocked = b <= r;
                     if blocked {
                         block.clear();
-                        self.index.within(&c.as_vec3().to_array(), ((r + b) * (1.0 + 1e-5)) as f32 + f32::EPSILON, block);
+                        self.index.within(&c.as_vec3().to_array(), self.radius32(c, r + b), block);
                         // (Copied side by side once: every point of the block scans them.)
                         bpos.clear();
                         bpos.extend(block.iter().map(|&(j, _)| self.pos[j as usize]));
@@ -277,7 +304,7 @@ impl Cloud {
                         .map(|&(_, k)| {
                             let q = at[k as usize];
                             if !blocked {
-                                self.neighbours_in(q, r, min, max, ordered, out);
+                                self.neighbours_in(q, r, cap, min, max, ordered, out);
                                 return (k, f(state, k, out));
                             }
                             // The block list holds every point within `reach` of q.
@@ -291,8 +318,9 @@ impl Cloud {
                             if out.len() < min {
                                 // The nearest `min`, from the list if it surely holds them
                                 // (those beyond the ball, up to `reach`, are added in the
-                                // list's order, as if they had been gathered in one pass).
-                                let reach = r + b - q.distance(c);
+                                // list's order, as if they had been gathered in one pass; never
+                                // beyond `cap`).
+                                let reach = (r + b - q.distance(c)).min(cap);
                                 d2s.clear();
                                 for (&(j, _), p) in block.iter().zip(bpos.iter()) {
                                     let d2 = p.distance_squared(q);
@@ -302,9 +330,9 @@ impl Cloud {
                                 }
                                 out.append(d2s);
                                 if out.len() >= min {
-                                    self.keep_nearest(q, r, min, out);
+                                    self.keep_nearest(q, r, cap, min, out);
                                 } else {
-                                    self.neighbours_in(q, r, min, max, ordered, out);
+                                    self.neighbours_in(q, r, cap, min, max, ordered, out);
                                     return (k, f(state, k, out));
                                 }
                             }
@@ -329,7 +357,11 @@ const MAX_BLOCK: usize = 64;
 pub struct Neighbourhood {
     /// Ball radius.
     pub radius: f64,
-    /// Fewest points: the nearest this many where the ball holds fewer.
+    /// Widest a sparse neighbourhood is widened to (never narrower than the ball). A tile holds every point within its halo
+    /// of its core, so a neighbourhood no wider than the halo is the same in every tiling;
+    /// wider, it could reach past the halo and depend on where the tile borders fall.
+    pub reach: f64,
+    /// Fewest points: the nearest this many within `reach` where the ball holds fewer.
     pub min: usize,
     /// Most points: an even subsample of the ball where it holds more.
     pub max: usize,
@@ -364,7 +396,7 @@ mod tests {
         assert!(cloud.rank.get().is_none());
         assert!(plain.iter().any(|b| b.len() == 40), "no ball was thinned");
         // map_neighbourhoods builds the ranks; the per-point queries above compared coordinates.
-        let nb = Neighbourhood { radius: 0.6, min: 10, max: 40, ordered: true };
+        let nb = Neighbourhood { radius: 0.6, reach: f64::INFINITY, min: 10, max: 40, ordered: true };
         let ranked = cloud.map_neighbourhoods(&which, nb, || (), |_, _, buf| buf.to_vec());
         assert!(cloud.rank.get().is_some());
         let ids = |v: &Vec<Vec<(u32, f32)>>| v.iter().map(|b| b.iter().map(|a| a.0).collect::<Vec<_>>()).collect::<Vec<_>>();
@@ -397,7 +429,7 @@ mod tests {
             let at: Vec<DVec3> = (3..9).flat_map(|x| (3..9).map(move |y| DVec3::new(500_000.0 + x as f64 + 0.5, 5_400_000.0 + y as f64, 100.0))).collect();
             let local: Vec<DVec3> = at.iter().map(|&q| q - origin).collect();
             let key = |j: u32| (cloud.at(j as usize) + cloud.origin).round().as_i64vec3().to_array();
-            let nb = Neighbourhood { radius: r, min, max: 100, ordered: true };
+            let nb = Neighbourhood { radius: r, reach: f64::INFINITY, min, max: 100, ordered: true };
             let mut blocked = cloud.map_neighbourhoods_at(&local, nb, || (), |_, _, buf| buf.iter().map(|a| key(a.0)).collect::<Vec<_>>());
             for (q, b) in local.iter().zip(&mut blocked) {
                 let mut one = Vec::new();
@@ -414,5 +446,52 @@ mod tests {
         assert!(a.iter().all(|v| v.len() == min));
         let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
         assert_eq!(differ, 0, "{differ} of {} neighbourhoods differ", a.len());
+    }
+
+    #[test]
+    fn balls_hold_their_rim_points_far_from_the_origin() {
+        // Points just inside (and just outside) a small ball a kilometre from the cloud's
+        // origin, where f32 coordinates are rounded by far more than the ball's relative
+        // margin: membership must still follow the f64 distances.
+        let mut rng = crate::synth::rng::Rng::stream(3, 0);
+        let r = 0.1;
+        let centres: Vec<DVec3> = (0..20).map(|k| DVec3::new(1000.0 + k as f64 * 0.731, 700.0 + k as f64 * 0.377, 50.0)).collect();
+        let mut world = vec![DVec3::ZERO];
+        for &c in &centres {
+            for k in 0..200 {
+                let d = rng.in_ball(1.0).normalize_or(DVec3::X);
+                world.push(c + d * r * if k % 2 == 0 { 1.0 - 1e-9 } else { 1.0 + 1e-9 });
+            }
+        }
+        let cloud = Cloud::new(&world);
+        let mut buf = Vec::new();
+        for &c in &centres {
+            let q = c - cloud.origin;
+            let truth = (0..cloud.len()).filter(|&i| cloud.at(i).distance_squared(q) <= r * r).count();
+            assert_eq!(cloud.count_within(q, r, &mut buf), truth);
+            cloud.neighbours(q, r, 0, usize::MAX, &mut buf);
+            assert_eq!(buf.len(), truth);
+        }
+    }
+
+    #[test]
+    fn sparse_neighbourhoods_are_widened_no_farther_than_their_reach() {
+        // A unit grid: a ball of radius 1.5 holds 9 points, the 20 nearest reach out to
+        // sqrt(5), and within reach 2 there are 13 (the ring at distance 2 included). A reach
+        // below the radius does not shrink the ball.
+        let world: Vec<DVec3> = (0..144).map(|k| DVec3::new((k % 12) as f64, (k / 12) as f64, 0.0)).collect();
+        let cloud = Cloud::new(&world);
+        let at: Vec<DVec3> = (4..8).flat_map(|x| (4..8).map(move |y| DVec3::new(x as f64, y as f64, 0.0))).collect();
+        for (reach, count) in [(f64::INFINITY, 20), (2.0, 13), (1.0, 9)] {
+            let nb = Neighbourhood { radius: 1.5, reach, min: 20, max: 100, ordered: true };
+            let blocked = cloud.map_neighbourhoods_at(&at, nb, || (), |_, _, buf| buf.to_vec());
+            for (q, b) in at.iter().zip(&blocked) {
+                let mut one = Vec::new();
+                cloud.neighbours_in(*q, 1.5, reach, 20, 100, true, &mut one);
+                assert_eq!(&one, b, "reach {reach}: query by query and by blocks");
+                assert_eq!(b.len(), count, "reach {reach} at {q}");
+                assert!(b.iter().all(|a| (a.1 as f64) <= reach.max(1.5).powi(2) + 1e-9), "reach {reach} at {q}");
+            }
+        }
     }
 }

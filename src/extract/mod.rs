@@ -84,6 +84,15 @@ pub const TARGET_NEIGHBOURS: f64 = 150.0;
 /// The default length unit is at least this many noise deviations.
 pub const NOISE_SCALE: f64 = 1.5;
 
+impl Resolved {
+    /// The halo a tile needs around its core for stages 1-2: the widest neighbourhood they
+    /// read, with a margin. Sparse neighbourhoods are widened no farther, so that every
+    /// point's neighbourhood is the same in any tiling.
+    pub fn halo(&self) -> f64 {
+        1.25 * self.fit_radius.max(self.rmls_radius)
+    }
+}
+
 impl Params {
     /// Resolves defaults given the measured spacing `kappa` and noise `noise`.
     pub fn resolve(&self, kappa: f64, noise: f64) -> Resolved {
@@ -204,14 +213,16 @@ pub fn stat_sample(key: u64, total: u64, seed: u64) -> bool {
 pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<(f64, f64, f64)> {
     const K: usize = 16;
     buf.clear();
-    cloud.index.nearest_n(&cloud.points[i], K + 1, buf);
+    // (A few more than K + 1 from the f32 tree, whose distances depend on the tile's origin in
+    // their last bits; the K-th neighbour's distance is then taken in f64, from the f64
+    // positions, so it is the same in every tile.)
+    cloud.index.nearest_n(&cloud.points[i], K + 1 + 8, buf);
     if buf.len() < K + 1 {
         return None;
     }
-    // Distances in f64 from the f64 positions: the f32 tree's own distances depend on the
-    // tile's origin in their last bits.
     let q = cloud.at(i);
-    let rk = buf.iter().map(|b| cloud.at(b.0 as usize).distance_squared(q)).fold(0.0f64, f64::max).sqrt();
+    let mut d2: Vec<f64> = buf.iter().map(|b| cloud.at(b.0 as usize).distance_squared(q)).collect();
+    let rk = d2.select_nth_unstable_by(K, f64::total_cmp).1.sqrt();
     let kappa = rk * (2f64.ln() / K as f64).sqrt();
     // Points per unit area around this point, from the count in the 16-kappa ball.
     let density = cloud.count_within(q, 16.0 * kappa, buf) as f64 / (std::f64::consts::PI * (16.0 * kappa).powi(2));
@@ -249,6 +260,20 @@ fn median(v: &mut [f64]) -> f64 {
     *v.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
 }
 
+/// `x` rounded to 32 significant bits. The global quantities (spacing, noise, tau) are
+/// statistics of fits made in each tile's local coordinates, and their last bits depend on
+/// where a tile's origin lies; rounded, they come out the same in any tiling (unless two
+/// values straddle a rounding boundary, a chance of about one in a billion), so that no
+/// candidate or projection decides differently because of the tiling.
+pub fn settle(x: f64) -> f64 {
+    if !x.is_finite() {
+        return x;
+    }
+    const DROP: u32 = 52 - 31;
+    let b = x.to_bits();
+    f64::from_bits((b + (1 << (DROP - 1))) & !((1u64 << DROP) - 1))
+}
+
 /// Resolves the parameters from the sampled statistics (spacing, noise, points per unit
 /// area): spacing and noise are their medians; `keep` thins the cloud so that a fit sees about
 /// [`TARGET_NEIGHBOURS`] points.
@@ -256,7 +281,7 @@ pub fn resolve(params: &Params, stats: &[(f64, f64, f64)]) -> Resolved {
     let mut k: Vec<f64> = stats.iter().map(|s| s.0).collect();
     let mut n: Vec<f64> = stats.iter().map(|s| s.1).collect();
     let mut d: Vec<f64> = stats.iter().map(|s| s.2).collect();
-    let mut r = params.resolve(median(&mut k), median(&mut n));
+    let mut r = params.resolve(settle(median(&mut k)), settle(median(&mut n)));
     let count = median(&mut d) * std::f64::consts::PI * r.fit_radius.powi(2);
     r.keep = if count > 0.0 { (TARGET_NEIGHBOURS / count).min(1.0) } else { 1.0 };
     if r.keep >= 0.7 {
@@ -291,7 +316,7 @@ pub fn project_core(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> (Vec<Wor
     // spacing), not by its id, so the same point gets the same stream in any file layout.
     let q = r.kappa / 4096.0;
     let ids: Vec<u64> = candidates.iter().map(|&i| position_key(cloud.at(i as usize) + cloud.origin, q)).collect();
-    let pp = project::ProjectParams { radius: r.rmls_radius, min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed, noise: r.noise };
+    let pp = project::ProjectParams { radius: r.rmls_radius, reach: r.halo(), min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed, noise: r.noise };
     let projected = project::project(cloud, candidates, &ids, &pp);
     let one = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
     let o = cloud.origin;
@@ -470,8 +495,8 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
 
     let t = Instant::now();
     let all: Vec<u32> = (0..cloud.len() as u32).collect();
-    let res = candidates::residuals(&cloud, &all, r.fit_radius);
-    let tau = params.tau.unwrap_or_else(|| res.iter().map(|&x| x as f64).sum::<f64>() / res.len().max(1) as f64);
+    let res = candidates::residuals(&cloud, &all, r.fit_radius, r.halo());
+    let tau = params.tau.unwrap_or_else(|| settle(candidates::ResidualSum::of(res.iter().copied()).mean()));
     let cand: Vec<u32> = all.iter().copied().filter(|&i| res[i as usize] as f64 > tau).collect();
     counts.candidates = cand.len() as u64;
     seconds.candidates = t.elapsed().as_secs_f64();
@@ -559,4 +584,21 @@ fn align(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
     let a = if a.dot(reference[0]) < 0.0 { -a } else { a };
     let b = if b.dot(reference[1]) < 0.0 { -b } else { b };
     [a, b]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::settle;
+
+    #[test]
+    fn settled_values_forget_their_last_bits() {
+        for x in [1.0f64, 0.007509334601371811, 0.0022075607504528335, 123456.789] {
+            let up = f64::from_bits(x.to_bits() + 3);
+            let down = f64::from_bits(x.to_bits() - 3);
+            assert_eq!(settle(up), settle(x));
+            assert_eq!(settle(down), settle(x));
+            assert!((settle(x) - x).abs() <= x * 2f64.powi(-31));
+        }
+        assert_eq!(settle(0.0), 0.0);
+    }
 }

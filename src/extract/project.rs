@@ -39,6 +39,8 @@ pub struct CornerPoint {
 pub struct ProjectParams {
     /// Neighbourhood radius.
     pub radius: f64,
+    /// Widest a sparse neighbourhood is widened to (see [`Neighbourhood::reach`]).
+    pub reach: f64,
     /// Smallest inlier threshold (model units): curvature and quantisation allowance.
     pub min_threshold: f64,
     /// Two fitted surfaces whose normals differ by less than this (degrees) are one surface:
@@ -121,7 +123,7 @@ pub fn project(cloud: &Cloud, candidates: &[u32], ids: &[u64], p: &ProjectParams
     let mut slot: Vec<(u32, u64)> = candidates.iter().copied().zip(ids.iter().copied()).collect();
     slot.sort_unstable_by_key(|s| s.0);
     let id_of = |i: u32| slot[slot.binary_search_by_key(&i, |s| s.0).expect("candidate")].1;
-    let nb = Neighbourhood { radius: p.radius, min: MIN_NEIGHBOURS, max: MAX_NEIGHBOURS, ordered: true };
+    let nb = Neighbourhood { radius: p.radius, reach: p.reach, min: MIN_NEIGHBOURS, max: MAX_NEIGHBOURS, ordered: true };
     cloud.map_neighbourhoods(candidates, nb, Scratch::default, |scratch, i, buf| project_one(cloud, i as usize, id_of(i), p, buf, scratch))
 }
 
@@ -510,7 +512,7 @@ mod tests {
         let cand: Vec<u32> = (0..cloud.len() as u32).filter(|&i| near(i)).collect();
         let ids: Vec<u64> = cand.iter().map(|&i| cloud.gid[i as usize]).collect();
         // (The deviation about a plane of a displacement uniform in a ball is radius / sqrt 5.)
-        let p = ProjectParams { radius, min_threshold: 1e-4, min_angle_deg: 28.0, seed: 1, noise: noise / 5f64.sqrt() };
+        let p = ProjectParams { radius, reach: f64::INFINITY, min_threshold: 1e-4, min_angle_deg: 28.0, seed: 1, noise: noise / 5f64.sqrt() };
         let offsets: Vec<f64> = project(&cloud, &cand, &ids, &p).iter().filter_map(|o| o.edge).map(|e| (e.p + cloud.origin).dot(out_dir)).collect();
         (offsets.iter().sum::<f64>() / offsets.len() as f64, offsets.len())
     }
