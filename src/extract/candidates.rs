@@ -20,7 +20,7 @@ pub fn residuals(cloud: &Cloud, which: &[u32], r: f64, reach: f64) -> Vec<f32> {
     cloud.map_neighbourhoods(which, nb, Vec::new, |pts, i, buf| residual_of(cloud, i as usize, r, buf, pts))
 }
 
-fn residual_of(cloud: &Cloud, _i: usize, r: f64, buf: &[(u32, f32)], pts: &mut Vec<(DVec3, f64)>) -> f32 {
+fn residual_of(cloud: &Cloud, i: usize, r: f64, buf: &[(u32, f32)], pts: &mut Vec<(DVec3, f64)>) -> f32 {
     if buf.len() < 8 {
         // Too sparse to fit a quadratic: not evidence of a feature.
         return 0.0;
@@ -30,7 +30,7 @@ fn residual_of(cloud: &Cloud, _i: usize, r: f64, buf: &[(u32, f32)], pts: &mut V
     let h2 = reach2 / 4.0;
     pts.clear();
     pts.extend(buf.iter().map(|&(j, d2)| (cloud.at(j as usize), (-(d2 as f64) / h2).exp())));
-    let Some(pca) = Pca::of(pts.iter().copied()) else { return 0.0 };
+    let Some(pca) = Pca::of_near(pts.iter().copied(), cloud.at(i)) else { return 0.0 };
     let frame = Frame::new(pca.mean, pca.normal());
     let Some(quad) = Quadric::fit(frame, pts.iter().copied(), 1e-6) else { return 0.0 };
     pts.iter().map(|&(p, _)| quad.value(p).abs()).fold(0.0, f64::max) as f32

@@ -41,7 +41,37 @@ impl Pca {
         // (nalgebra's iterative solver. glamx's closed form was tried: about 10% faster overall,
         // but with it the curves depended on how a cloud was split into files, even with
         // canonical eigenvector signs, and its fallback axis broke exactly collinear points.)
-        let c = c.map(|x| x / sw);
+        Some(Pca::from_covariance(mean, c.map(|x| x / sw)))
+    }
+
+    /// As [`Pca::of`], in one pass over the points instead of two: the moments are taken
+    /// about `centre`, which should lie among the points (for example the query point of a
+    /// neighbourhood), so that the covariance loses no more than a few digits to cancellation.
+    pub fn of_near(points: impl Iterator<Item = (DVec3, f64)>, centre: DVec3) -> Option<Pca> {
+        let (mut sw, mut sd) = (0.0, DVec3::ZERO);
+        let mut c = [0.0f64; 6];
+        for (p, w) in points {
+            let d = p - centre;
+            let wd = d * w;
+            sw += w;
+            sd += wd;
+            c[0] += wd.x * d.x;
+            c[1] += wd.x * d.y;
+            c[2] += wd.x * d.z;
+            c[3] += wd.y * d.y;
+            c[4] += wd.y * d.z;
+            c[5] += wd.z * d.z;
+        }
+        if sw <= 0.0 {
+            return None;
+        }
+        let m = sd / sw;
+        let c = [c[0] / sw - m.x * m.x, c[1] / sw - m.x * m.y, c[2] / sw - m.x * m.z, c[3] / sw - m.y * m.y, c[4] / sw - m.y * m.z, c[5] / sw - m.z * m.z];
+        Some(Pca::from_covariance(centre + m, c))
+    }
+
+    /// Eigen-decomposition of the covariance `c` (upper triangle: xx, xy, xz, yy, yz, zz).
+    fn from_covariance(mean: DVec3, c: [f64; 6]) -> Pca {
         let e = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]).symmetric_eigen();
         let mut idx = [0usize, 1, 2];
         idx.sort_by(|&a, &b| e.eigenvalues[b].total_cmp(&e.eigenvalues[a]));
@@ -53,7 +83,7 @@ impl Pca {
         let a = e.eigenvalues[idx[0]].max(0.0);
         let b = e.eigenvalues[idx[1]].clamp(0.0, a);
         let c = e.eigenvalues[idx[2]].clamp(0.0, b);
-        Some(Pca { mean, values: [a, b, c], vectors: idx.map(vec) })
+        Pca { mean, values: [a, b, c], vectors: idx.map(vec) }
     }
 
     /// Normal of the best-fitting plane (smallest component).
@@ -155,38 +185,57 @@ impl Quadric {
     /// curvature terms are damped by `ridge` (relative to the data's spread) so that a
     /// one-sided or sparse neighbourhood falls back smoothly towards a plane.
     pub fn fit(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> Option<Quadric> {
-        // The normal equations, accumulated on their upper triangle only (the products are
-        // those of `row * row^T * w`, so the sums are the same to the bit).
-        let mut upper = [0.0f64; 21];
+        // The normal equations' entries are weighted moments of the local coordinates,
+        // sum w x^a y^b (a + b <= 4, 15 of them for the 21 entries of the upper triangle),
+        // and sum w z x^a y^b (a + b <= 2) on the right: about half the products of
+        // accumulating `row * row^T * w` entry by entry.
+        let [mut m00, mut m10, mut m01, mut m20, mut m11, mut m02] = [0.0f64; 6];
+        let [mut m30, mut m21, mut m12, mut m03] = [0.0f64; 4];
+        let [mut m40, mut m31, mut m22, mut m13, mut m04] = [0.0f64; 5];
         let mut b = [0.0f64; 6];
-        let mut scale2 = 0.0;
-        let mut sw = 0.0;
         for (p, w) in points {
             let l = frame.local(p);
-            let row = [1.0, l.x, l.y, l.x * l.x, l.x * l.y, l.y * l.y];
-            let mut k = 0;
-            for i in 0..6 {
-                for j in i..6 {
-                    upper[k] += row[i] * row[j] * w;
-                    k += 1;
-                }
-                b[i] += row[i] * (l.z * w);
-            }
-            scale2 += w * (l.x * l.x + l.y * l.y);
-            sw += w;
+            let (x, y) = (l.x, l.y);
+            let (xx, xy, yy) = (x * x, x * y, y * y);
+            let (wx, wy) = (w * x, w * y);
+            let (wxx, wxy, wyy) = (wx * x, wx * y, wy * y);
+            m00 += w;
+            m10 += wx;
+            m01 += wy;
+            m20 += wxx;
+            m11 += wxy;
+            m02 += wyy;
+            m30 += wxx * x;
+            m21 += wxx * y;
+            m12 += wxy * y;
+            m03 += wyy * y;
+            m40 += wxx * xx;
+            m31 += wxx * xy;
+            m22 += wxx * yy;
+            m13 += wxy * yy;
+            m04 += wyy * yy;
+            let wz = w * l.z;
+            b[0] += wz;
+            b[1] += wz * x;
+            b[2] += wz * y;
+            b[3] += wz * xx;
+            b[4] += wz * xy;
+            b[5] += wz * yy;
         }
+        let sw = m00;
         if sw <= 0.0 {
             return None;
         }
-        let mut m = Matrix6::<f64>::zeros();
-        let mut k = 0;
-        for i in 0..6 {
-            for j in i..6 {
-                m[(i, j)] = upper[k];
-                m[(j, i)] = upper[k];
-                k += 1;
-            }
-        }
+        let scale2 = m20 + m02;
+        #[rustfmt::skip]
+        let mut m = Matrix6::new(
+            m00, m10, m01, m20, m11, m02,
+            m10, m20, m11, m30, m21, m12,
+            m01, m11, m02, m21, m12, m03,
+            m20, m30, m21, m40, m31, m22,
+            m11, m21, m12, m31, m22, m13,
+            m02, m12, m03, m22, m13, m04,
+        );
         let b = Vector6::from(b);
         let s2 = (scale2 / sw).max(1e-300);
         for i in 3..6 {
@@ -278,19 +327,21 @@ mod tests {
                     (axes.u * l.x + axes.v * l.y + axes.n * l.z + DVec3::splat(3.0 * scale), 1.0)
                 })
                 .collect();
-            let p = Pca::of(pts.iter().copied()).unwrap();
-            let cov = |v: DVec3| pts.iter().map(|&(q, _)| (q - p.mean) * (q - p.mean).dot(v)).sum::<DVec3>() / pts.len() as f64;
-            let total: f64 = p.values.iter().sum();
-            assert!(p.values[0] >= p.values[1] && p.values[1] >= p.values[2], "{:?}", p.values);
-            for k in 0..3 {
-                let v = p.vectors[k];
-                assert!((v.length() - 1.0).abs() < 1e-9);
-                // Vectors to 1e-9; values (closed form) to 1e-7, as a double root of the
-                // characteristic cubic is only found to about the square root of the precision.
-                let rayleigh = v.dot(cov(v));
-                assert!((cov(v) - v * rayleigh).length() <= 1e-9 * total, "case {case}: component {k}");
-                assert!((rayleigh - p.values[k]).abs() <= 1e-7 * total, "case {case}: value {k}");
-                assert!(v.dot(p.vectors[(k + 1) % 3]).abs() < 1e-6, "case {case}: not orthogonal");
+            // (One pass about a point of the set, as the candidate fits take it, or two.)
+            for p in [Pca::of(pts.iter().copied()).unwrap(), Pca::of_near(pts.iter().copied(), pts[7].0).unwrap()] {
+                let cov = |v: DVec3| pts.iter().map(|&(q, _)| (q - p.mean) * (q - p.mean).dot(v)).sum::<DVec3>() / pts.len() as f64;
+                let total: f64 = p.values.iter().sum();
+                assert!(p.values[0] >= p.values[1] && p.values[1] >= p.values[2], "{:?}", p.values);
+                for k in 0..3 {
+                    let v = p.vectors[k];
+                    assert!((v.length() - 1.0).abs() < 1e-9);
+                    // Vectors to 1e-9; values (closed form) to 1e-7, as a double root of the
+                    // characteristic cubic is only found to about the square root of the precision.
+                    let rayleigh = v.dot(cov(v));
+                    assert!((cov(v) - v * rayleigh).length() <= 1e-9 * total, "case {case}: component {k}");
+                    assert!((rayleigh - p.values[k]).abs() <= 1e-7 * total, "case {case}: value {k}");
+                    assert!(v.dot(p.vectors[(k + 1) % 3]).abs() < 1e-6, "case {case}: not orthogonal");
+                }
             }
         }
     }
