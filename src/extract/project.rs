@@ -222,7 +222,7 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
         s.d.extend(s.remaining.iter().map(|&j| (s.pts[j].distance_squared(pc), j)));
         let k = SEED_PATCH.max(s.pts.len() / 10).min(s.d.len());
         s.d.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
-        let Some(pca) = Pca::of(s.d[..k].iter().map(|&(_, j)| (s.pts[j], 1.0))) else { continue };
+        let Some(pca) = Pca::of_near(s.d[..k].iter().map(|&(_, j)| (s.pts[j], 1.0)), pc) else { continue };
         let frame = Frame::new(pca.mean, pca.normal());
         s.res.clear();
         s.res.extend(s.remaining.iter().map(|&j| (s.pts[j] - frame.o).dot(frame.n).abs()));
@@ -267,7 +267,7 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
 /// is kept only if its curvature terms are significant (see [`CURVATURE_F`]). Returns the
 /// surface and its RMS.
 fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f64) -> Option<(Quadric, f64)> {
-    let pca = Pca::of(members.iter().map(|&j| (pts[j], 1.0)))?;
+    let pca = Pca::of_near(members.iter().map(|&j| (pts[j], 1.0)), pts[*members.first()?])?;
     let mut n = pca.normal();
     if n.dot(orient) < 0.0 {
         n = -n;
