@@ -483,7 +483,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     };
     // (Read on the pool, which is idle here.)
     let per_tile: Vec<ResidualSum> = tiles.par_iter().map(|&t| residuals_of(t).map(|v| ResidualSum::of(v.iter().map(|p| p.1)))).collect::<Result<_>>()?;
-    let total = per_tile.into_iter().fold(ResidualSum::default(), ResidualSum::add);
+    let total = per_tile.into_iter().fold(ResidualSum::default(), |a, b| a + b);
     let tau = params.tau.unwrap_or(extract::settle(total.mean()));
     pass.residuals = t.elapsed().as_secs_f64();
 

@@ -47,6 +47,15 @@ pub struct ResidualSum {
     count: u64,
 }
 
+impl std::ops::Add for ResidualSum {
+    type Output = ResidualSum;
+
+    /// Both sums together.
+    fn add(self, other: ResidualSum) -> ResidualSum {
+        ResidualSum { sum: self.sum + other.sum, count: self.count + other.count }
+    }
+}
+
 impl ResidualSum {
     const SCALE: f64 = 18_446_744_073_709_551_616.0; // 2^64
 
@@ -59,11 +68,6 @@ impl ResidualSum {
             s.count += 1;
         }
         s
-    }
-
-    /// Both sums together.
-    pub fn add(self, other: ResidualSum) -> ResidualSum {
-        ResidualSum { sum: self.sum + other.sum, count: self.count + other.count }
     }
 
     /// Number of residuals summed.
@@ -93,7 +97,7 @@ mod tests {
         reversed.reverse();
         assert_eq!(ResidualSum::of(reversed), whole);
         for parts in [2, 7, 64] {
-            let grouped = v.chunks(v.len().div_ceil(parts)).rev().map(|c| ResidualSum::of(c.iter().copied())).fold(ResidualSum::default(), ResidualSum::add);
+            let grouped = v.chunks(v.len().div_ceil(parts)).rev().map(|c| ResidualSum::of(c.iter().copied())).fold(ResidualSum::default(), |a, b| a + b);
             assert_eq!(grouped, whole, "{parts} groups");
         }
         let mean = v.iter().map(|&x| x as f64).sum::<f64>() / v.len() as f64;

@@ -130,14 +130,16 @@ impl Cloud {
     /// `min` nearest where the ball holds fewer (sparse regions of unevenly sampled scans); at
     /// most about `max` of them, an even subsample of the ball when there are more.
     pub fn neighbours(&self, q: DVec3, r: f64, min: usize, max: usize, out: &mut Vec<(u32, f32)>) {
-        self.neighbours_in(q, r, f64::INFINITY, min, max, true, out)
+        self.neighbours_in(q, Neighbourhood { radius: r, reach: f64::INFINITY, min, max, ordered: true }, out)
     }
 
-    /// As [`Cloud::neighbours`], but a sparse neighbourhood is widened no farther than `reach`
-    /// (it may then hold fewer than `min` points). With `ordered` false the points come in the
-    /// tree's order unless they must be subsampled (for order-insensitive uses such as
-    /// least-squares sums, where only the last bits can depend on it).
-    pub fn neighbours_in(&self, q: DVec3, r: f64, reach: f64, min: usize, max: usize, ordered: bool, out: &mut Vec<(u32, f32)>) {
+    /// As [`Cloud::neighbours`], for a neighbourhood `nb`: a sparse one is widened no farther
+    /// than `nb.reach` (it may then hold fewer than `nb.min` points), and unless `nb.ordered`
+    /// the points come in the tree's order when they need not be subsampled (for
+    /// order-insensitive uses such as least-squares sums, where only the last bits can depend
+    /// on it).
+    pub fn neighbours_in(&self, q: DVec3, nb: Neighbourhood, out: &mut Vec<(u32, f32)>) {
+        let Neighbourhood { radius: r, reach, min, max, ordered } = nb;
         out.clear();
         // Query the f32 tree a little wide, then decide membership in f64, so the ball holds
         // the same points wherever the tile's origin lies.
@@ -304,7 +306,7 @@ impl Cloud {
                         .map(|&(_, k)| {
                             let q = at[k as usize];
                             if !blocked {
-                                self.neighbours_in(q, r, cap, min, max, ordered, out);
+                                self.neighbours_in(q, nb, out);
                                 return (k, f(state, k, out));
                             }
                             // The block list holds every point within `reach` of q.
@@ -332,7 +334,7 @@ impl Cloud {
                                 if out.len() >= min {
                                     self.keep_nearest(q, r, cap, min, out);
                                 } else {
-                                    self.neighbours_in(q, r, cap, min, max, ordered, out);
+                                    self.neighbours_in(q, nb, out);
                                     return (k, f(state, k, out));
                                 }
                             }
@@ -487,7 +489,7 @@ mod tests {
             let blocked = cloud.map_neighbourhoods_at(&at, nb, || (), |_, _, buf| buf.to_vec());
             for (q, b) in at.iter().zip(&blocked) {
                 let mut one = Vec::new();
-                cloud.neighbours_in(*q, 1.5, reach, 20, 100, true, &mut one);
+                cloud.neighbours_in(*q, nb, &mut one);
                 assert_eq!(&one, b, "reach {reach}: query by query and by blocks");
                 assert_eq!(b.len(), count, "reach {reach} at {q}");
                 assert!(b.iter().all(|a| (a.1 as f64) <= reach.max(1.5).powi(2) + 1e-9), "reach {reach} at {q}");
