@@ -169,19 +169,33 @@ impl Cloud {
     fn keep_nearest(&self, q: DVec3, r: f64, reach: f64, min: usize, out: &mut Vec<(u32, f32)>) {
         let quantum = 1e-9 * r * r;
         let reach = reach.max(r);
-        let mut keyed: Vec<((u64, ([i64; 3], u64)), (u32, f32))> = out
+        let mut keyed: Vec<(u64, (u32, f32))> = out
             .iter()
             .filter_map(|&(j, _)| {
                 let d2 = self.pos[j as usize].distance_squared(q);
-                (d2 <= reach * reach).then(|| (((d2 / quantum).round() as u64, self.order_key(j)), (j, d2 as f32)))
+                (d2 <= reach * reach).then(|| ((d2 / quantum).round() as u64, (j, d2 as f32)))
             })
             .collect();
         let k = min.min(keyed.len());
-        if k > 0 && k < keyed.len() {
-            keyed.select_nth_unstable_by(k - 1, |a, b| a.0.cmp(&b.0));
-        }
         out.clear();
-        out.extend(keyed[..k].iter().map(|e| e.1));
+        if k == 0 {
+            return;
+        }
+        if k == keyed.len() {
+            out.extend(keyed.iter().map(|e| e.1));
+            return;
+        }
+        // The k nearest by rounded distance; the points tied with the k-th (the only ones whose
+        // choice the order could decide) are then taken in coordinate order. (Comparing
+        // coordinates only for those is far cheaper than keying every point by them.)
+        let cut = keyed.select_nth_unstable_by_key(k - 1, |e| e.0).1 .0;
+        out.extend(keyed.iter().filter(|e| e.0 < cut).map(|e| e.1));
+        let mut tied: Vec<(u32, f32)> = keyed.iter().filter(|e| e.0 == cut).map(|e| e.1).collect();
+        let room = k - out.len();
+        if tied.len() > room {
+            tied.select_nth_unstable_by(room - 1, |a, b| self.coordinate_order(a.0, b.0));
+        }
+        out.extend_from_slice(&tied[..room]);
     }
 
     /// Builds the coordinate ranks (see `rank`) ahead of a parallel pass that orders the
