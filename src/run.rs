@@ -666,11 +666,11 @@ fn tile_statistics(store: &Store, grid: &Grid, t: u32, first: (TilePoints, Vec<b
         let mut again = Vec::new();
         let mut need = 0.0f64;
         for (&i, s) in sample.iter().zip(stats) {
-            // The widest ball the statistics read (the 16-spacing ball, with the margin of the
-            // tree query), or everything for a sample that found too few neighbours.
+            // Whether the widest ball the statistics read (the 16-spacing ball, with the margin
+            // of the tree query) lies within the loaded halo. (A sample that found too few
+            // neighbours may find more with a wider one.)
             let r = s.map_or(f64::INFINITY, |s| 16.0 * s.0 * (1.0 + 1e-4));
-            let q = cloud.at(i) + cloud.origin;
-            let inside = (0..3).all(|a| (core.min[a] == f64::NEG_INFINITY || q[a] - r >= core.min[a] - halo) && (core.max[a] == f64::INFINITY || q[a] + r < core.max[a] + halo));
+            let inside = s.is_some() && within(&core, halo - r, cloud.at(i) + cloud.origin);
             if inside || halo >= cap {
                 if let Some(s) = s {
                     done.push((cloud.gid[i], s));

@@ -118,13 +118,6 @@ impl Params {
             seed: self.seed.unwrap_or(1),
         }
     }
-
-    /// The largest neighbourhood radius any stage reads around a point of a tile's core: the
-    /// halo a tile needs.
-    pub fn max_radius(&self, kappa: f64, noise: f64) -> f64 {
-        let r = self.resolve(kappa, noise);
-        r.fit_radius.max(r.rmls_radius)
-    }
 }
 
 /// Counts per stage.
