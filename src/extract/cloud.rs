@@ -303,7 +303,7 @@ impl Cloud {
         let mut done: Vec<(u32, T)> = blocks
             .par_iter()
             .map_init(
-                || (init(), Vec::new(), Vec::new(), Vec::new(), Vec::new()),
+                || (init(), Vec::new(), Coords::default(), Vec::new(), Vec::new()),
                 |(state, block, bpos, out, d2s), chunk| {
                     let c = chunk.iter().map(|o| at[o.1 as usize]).sum::<DVec3>() / chunk.len() as f64;
                     let b = chunk.iter().map(|o| at[o.1 as usize].distance(c)).fold(0.0, f64::max);
@@ -312,8 +312,7 @@ impl Cloud {
                         block.clear();
                         self.index.within(&c.as_vec3().to_array(), self.radius32(c, r + b), block);
                         // (Copied side by side once: every point of the block scans them.)
-                        bpos.clear();
-                        bpos.extend(block.iter().map(|&(j, _)| self.pos[j as usize]));
+                        bpos.fill(block.iter().map(|&(j, _)| self.pos[j as usize]));
                     }
                     chunk
                         .iter()
@@ -324,26 +323,14 @@ impl Cloud {
                                 return (k, f(state, k, out));
                             }
                             // The block list holds every point within `reach` of q.
-                            out.clear();
-                            for (&(j, _), p) in block.iter().zip(bpos.iter()) {
-                                let d2 = p.distance_squared(q);
-                                if d2 <= r * r {
-                                    out.push((j, d2 as f32));
-                                }
-                            }
+                            bpos.within(block, q, -1.0, r * r, out);
                             if out.len() < min {
                                 // The nearest `min`, from the list if it surely holds them
                                 // (those beyond the ball, up to `reach`, are added in the
                                 // list's order, as if they had been gathered in one pass; never
                                 // beyond `cap`).
                                 let reach = (r + b - q.distance(c)).min(cap);
-                                d2s.clear();
-                                for (&(j, _), p) in block.iter().zip(bpos.iter()) {
-                                    let d2 = p.distance_squared(q);
-                                    if d2 > r * r && d2 <= reach * reach {
-                                        d2s.push((j, d2 as f32));
-                                    }
-                                }
+                                bpos.within(block, q, r * r, reach * reach, d2s);
                                 out.append(d2s);
                                 if out.len() >= min {
                                     self.keep_nearest(q, r, cap, min, out);
@@ -362,6 +349,50 @@ impl Cloud {
             .collect();
         done.par_sort_unstable_by_key(|d| d.0);
         done.into_iter().map(|d| d.1).collect()
+    }
+}
+
+/// The positions of a block's list of points, coordinate by coordinate: scanning them for
+/// one ball is then a loop the compiler vectorises.
+#[derive(Default)]
+struct Coords {
+    x: Vec<f64>,
+    y: Vec<f64>,
+    z: Vec<f64>,
+    /// Squared distances to the current query.
+    d2: Vec<f64>,
+}
+
+impl Coords {
+    fn fill(&mut self, pos: impl Iterator<Item = DVec3>) {
+        self.x.clear();
+        self.y.clear();
+        self.z.clear();
+        for p in pos {
+            self.x.push(p.x);
+            self.y.push(p.y);
+            self.z.push(p.z);
+        }
+    }
+
+    /// Sets `out` to the entries of `list` (whose positions these are) at squared distance
+    /// from `q` above `lo2` (negative for none) and at most `hi2`, in list order.
+    fn within(&mut self, list: &[(u32, f32)], q: DVec3, lo2: f64, hi2: f64, out: &mut Vec<(u32, f32)>) {
+        let n = self.x.len();
+        self.d2.clear();
+        self.d2.extend(self.x.iter().zip(&self.y).zip(&self.z).map(|((&x, &y), &z)| {
+            let (dx, dy, dz) = (x - q.x, y - q.y, z - q.z);
+            dx * dx + dy * dy + dz * dz
+        }));
+        // Branch-free compaction: every entry is written, and kept by advancing past it.
+        out.clear();
+        out.resize(n, (0, 0.0));
+        let mut len = 0;
+        for (&(j, _), &d2) in list[..n].iter().zip(&self.d2) {
+            out[len] = (j, d2 as f32);
+            len += (d2 > lo2 && d2 <= hi2) as usize;
+        }
+        out.truncate(len);
     }
 }
 
