@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::extract::{self, candidates::ResidualSum, cloud::Cloud, Counts, Params, Resolved, Timings, WorldCorner, WorldEdge};
 use crate::io::{self, Filter, PointReader};
 use crate::tiles::{within, Bucketer, Grid, Store, TilePoints};
-use glam::{DVec3, Vec3};
+use glam::{DVec3, I64Vec3, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -629,6 +629,34 @@ fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs) -> R
 
 /// Local origin of a loaded tile: the minimum corner of its points (fits are computed in f64,
 /// so the choice only moves the last bits).
+/// Indices of the points of `xyz` within `radius` of a point flagged in `centre` (and of some
+/// a little farther), in order; None (keep every point) if that is most of them anyway, or if
+/// the grid of cells this takes would be too large.
+fn near(xyz: &[DVec3], centre: &[bool], radius: f64) -> Option<Vec<usize>> {
+    let lo = xyz.iter().copied().reduce(DVec3::min)?;
+    let hi = xyz.iter().copied().reduce(DVec3::max)?;
+    // Cells a little wider than the radius, so that rounding cannot put a point within the
+    // radius of a centre two cells away from it: such points lie in the centre's cell or in
+    // one of the 26 around it.
+    let side = radius * 1.01;
+    let dims = ((hi - lo) / side).floor().as_i64vec3() + 1;
+    let cells = dims.x.checked_mul(dims.y).and_then(|c| c.checked_mul(dims.z)).filter(|&c| c > 0 && c <= 1 << 28)?;
+    let cell = |p: DVec3| ((p - lo) / side).floor().as_i64vec3().clamp(I64Vec3::ZERO, dims - 1);
+    let index = |c: I64Vec3| (c.x + dims.x * (c.y + dims.y * c.z)) as usize;
+    let mut marked = vec![false; cells as usize];
+    for (&p, _) in xyz.iter().zip(centre).filter(|c| *c.1) {
+        let c = cell(p);
+        for d in (0..27).map(|k| I64Vec3::new(k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1)) {
+            let n = c + d;
+            if n.cmpge(I64Vec3::ZERO).all() && n.cmplt(dims).all() {
+                marked[index(n)] = true;
+            }
+        }
+    }
+    let keep: Vec<usize> = (0..xyz.len()).filter(|&i| marked[index(cell(xyz[i]))]).collect();
+    (keep.len() * 4 < xyz.len() * 3).then_some(keep)
+}
+
 fn tile_origin(tp: &TilePoints) -> DVec3 {
     tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
 }
@@ -646,6 +674,10 @@ fn tile_statistics(store: &Store, grid: &Grid, t: u32, first: (TilePoints, Vec<b
     let cap = STATS_HALO_GROWTH * halo0;
     let (mut tp, mut is_core) = first;
     let mut halo = halo0;
+    // Only the points within `reach` of a sample are indexed (None: all of them). A tile holds a
+    // few hundred samples at 100 M points, and their neighbourhoods a fifth of the points or
+    // less. A sample whose ball turns out wider is computed again with a wider reach.
+    let mut reach = Some(halo0);
     let mut todo: Option<Vec<u64>> = None;
     let mut done: Vec<(u64, (f64, f64, f64))> = Vec::new();
     loop {
@@ -658,34 +690,50 @@ fn tile_statistics(store: &Store, grid: &Grid, t: u32, first: (TilePoints, Vec<b
             .zip(&is_core)
             .map(|((&p, g), &c)| c && extract::stat_sample(extract::position_key(p, kq), total, seed) && todo.as_ref().is_none_or(|v| v.binary_search(g).is_ok()))
             .collect();
-        let cloud = Cloud::with_origin_parallel(&tp.xyz, &tp.gid, tile_origin(&tp));
-        drop(tp);
+        // (The origin is the whole tile's, so the local coordinates are the same either way.)
+        let origin = tile_origin(&tp);
+        let keep = reach.and_then(|r| near(&tp.xyz, &sampled, r));
+        let (cloud, sampled) = match &keep {
+            Some(keep) => {
+                let xyz: Vec<DVec3> = keep.iter().map(|&i| tp.xyz[i]).collect();
+                let gid: Vec<u64> = keep.iter().map(|&i| tp.gid[i]).collect();
+                (Cloud::with_origin_parallel(&xyz, &gid, origin), keep.iter().map(|&i| sampled[i]).collect())
+            }
+            None => (Cloud::with_origin_parallel(&tp.xyz, &tp.gid, origin), sampled),
+        };
+        let kept = keep.as_ref().map(|_| reach.unwrap_or(f64::INFINITY));
         let sample: Vec<usize> = (0..cloud.len()).into_par_iter().filter(|&i| sampled[cloud.ids[i] as usize]).collect();
         cloud.prepare_ordering(sample.len());
         let stats: Vec<Option<(f64, f64, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| extract::point_stats(&cloud, i, buf)).collect();
-        let mut again = Vec::new();
-        let mut need = 0.0f64;
+        let (mut again, mut need, mut wider_halo) = (Vec::new(), 0.0f64, false);
         for (&i, s) in sample.iter().zip(stats) {
-            // Whether the widest ball the statistics read (the 16-spacing ball, with the margin
-            // of the tree query) lies within the loaded halo. (A sample that found too few
-            // neighbours may find more with a wider one.)
+            // The widest ball the statistics read: the 16-spacing ball, with the margin of the
+            // tree query (unbounded if too few neighbours were found: more may lie farther).
             let r = s.map_or(f64::INFINITY, |s| 16.0 * s.0 * (1.0 + 1e-4));
-            let inside = s.is_some() && within(&core, halo - r, cloud.at(i) + cloud.origin);
-            if inside || halo >= cap {
+            // Whether it holds every point of the cloud: it lies within the points kept around
+            // the sample, and within the loaded halo (else, up to the widest halo).
+            let in_kept = kept.is_none_or(|k| r <= k);
+            let in_halo = s.is_some() && within(&core, halo - r, cloud.at(i) + cloud.origin);
+            if in_kept && (in_halo || halo >= cap) {
                 if let Some(s) = s {
                     done.push((cloud.gid[i], s));
                 }
             } else {
                 again.push(cloud.gid[i]);
                 need = need.max(r);
+                wider_halo |= !in_halo && halo < cap;
             }
         }
         if again.is_empty() {
             break;
         }
         again.sort_unstable();
-        halo = (1.01 * need).max(2.0 * halo).min(cap);
-        (tp, is_core) = load(store, grid, t, halo, 1.0, seed, kq)?;
+        reach = if need.is_finite() { reach.map(|k| (1.01 * need).max(2.0 * k)) } else { None };
+        if wider_halo {
+            halo = (1.01 * need).max(2.0 * halo).min(cap);
+            drop(cloud);
+            (tp, is_core) = load(store, grid, t, halo, 1.0, seed, kq)?;
+        }
         todo = Some(again);
     }
     done.sort_unstable_by_key(|d| d.0);
@@ -901,4 +949,38 @@ pub fn render_status(s: &Status) -> String {
     }
     out += &format!("  outputs    {}\n", if s.finished { "written" } else { "not yet" });
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::near;
+    use glam::DVec3;
+
+    #[test]
+    fn near_keeps_every_point_within_the_radius_of_a_centre_and_drops_far_ones() {
+        let mut rng = crate::synth::rng::Rng::stream(3, 0);
+        // Points on a tilted plane 1 km from the origin, a few of them centres.
+        let pts: Vec<DVec3> = (0..200_000).map(|_| DVec3::new(1000.0 + 50.0 * rng.f64(), -700.0 + 50.0 * rng.f64(), 0.0)).map(|p| DVec3::new(p.x, p.y, 0.3 * p.x - 0.2 * p.y)).collect();
+        let centre: Vec<bool> = (0..pts.len()).map(|i| i % 5000 == 17).collect();
+        let radius = 0.7;
+        let keep = near(&pts, &centre, radius).expect("a few centres keep a small share");
+        assert!(keep.windows(2).all(|w| w[0] < w[1]), "in order");
+        let centres: Vec<DVec3> = (0..pts.len()).filter(|&i| centre[i]).map(|i| pts[i]).collect();
+        let dist = |p: DVec3| centres.iter().map(|c| c.distance(p)).fold(f64::INFINITY, f64::min);
+        let kept: std::collections::HashSet<usize> = keep.iter().copied().collect();
+        for (i, &p) in pts.iter().enumerate() {
+            let d = dist(p);
+            if d <= radius {
+                assert!(kept.contains(&i), "point {i} at {d} from a centre was dropped");
+            }
+            // (Kept points lie in a centre's cell or a neighbouring one.)
+            if kept.contains(&i) {
+                assert!(d <= 2.0 * 1.01 * radius * 3f64.sqrt() + 1e-9, "point {i} at {d} was kept");
+            }
+        }
+        assert!(keep.len() < pts.len() / 10);
+        // Most of the points near: keep them all.
+        let all: Vec<bool> = (0..pts.len()).map(|i| i % 50 == 0).collect();
+        assert_eq!(near(&pts, &all, radius), None);
+    }
 }
