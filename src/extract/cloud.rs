@@ -275,8 +275,9 @@ impl Cloud {
     /// position in `at`, in parallel, passing its index in `at` and returning the results in
     /// that order. The positions are taken in blocks, those in one cell of a grid whose cells
     /// are 1.5 ball radii wide (`BLOCK_CELL`): one tree query around a block, wide enough for all its
-    /// positions, then each position's ball is cut from that list. This gives the same sets as
-    /// a query per position at a fraction of the cost.
+    /// positions, then each position's ball is cut from that list; a sparse ball is widened
+    /// from a second, wider list of the block (gathered once, for the first that needs it).
+    /// This gives the same sets as a query per position at a fraction of the cost.
     pub fn map_neighbourhoods_at<T: Send, S>(
         &self,
         at: &[DVec3],
@@ -303,8 +304,8 @@ impl Cloud {
         let mut done: Vec<(u32, T)> = blocks
             .par_iter()
             .map_init(
-                || (init(), Vec::new(), Coords::default(), Vec::new(), Vec::new()),
-                |(state, block, bpos, out, d2s), chunk| {
+                || (init(), Vec::new(), Coords::default(), Vec::new(), Vec::new(), (Vec::new(), Coords::default())),
+                |(state, block, bpos, out, d2s, (wide, wpos)), chunk| {
                     let c = chunk.iter().map(|o| at[o.1 as usize]).sum::<DVec3>() / chunk.len() as f64;
                     let b = chunk.iter().map(|o| at[o.1 as usize].distance(c)).fold(0.0, f64::max);
                     let blocked = b <= BLOCK_CELL * r;
@@ -314,6 +315,9 @@ impl Cloud {
                         // (Copied side by side once: every point of the block scans them.)
                         bpos.fill(block.iter().map(|&(j, _)| self.pos[j as usize]));
                     }
+                    // The wider list a sparse neighbourhood is cut from: every point within
+                    // `cap` of any position of the block, gathered for the first that needs it.
+                    let mut wide_ready = false;
                     chunk
                         .iter()
                         .map(|&(_, k)| {
@@ -332,12 +336,22 @@ impl Cloud {
                                 let reach = (r + b - q.distance(c)).min(cap);
                                 bpos.within(block, q, r * r, reach * reach, d2s);
                                 out.append(d2s);
-                                if out.len() >= min {
-                                    self.keep_nearest(q, r, cap, min, out);
-                                } else {
-                                    self.neighbours_in(q, nb, out);
-                                    return (k, f(state, k, out));
+                                if out.len() < min && reach < cap {
+                                    if !cap.is_finite() {
+                                        self.neighbours_in(q, nb, out);
+                                        return (k, f(state, k, out));
+                                    }
+                                    // (One more tree query for the block, instead of two, a
+                                    // ball and the nearest, for each sparse position.)
+                                    if !wide_ready {
+                                        wide.clear();
+                                        self.index.within(&c.as_vec3().to_array(), self.radius32(c, b + cap), wide);
+                                        wpos.fill(wide.iter().map(|&(j, _)| self.pos[j as usize]));
+                                        wide_ready = true;
+                                    }
+                                    wpos.within(wide, q, -1.0, cap * cap, out);
                                 }
+                                self.keep_nearest(q, r, cap, min, out);
                             }
                             self.order_and_thin(max, ordered, out);
                             (k, f(state, k, out))
@@ -476,29 +490,33 @@ mod tests {
             }
         }
         let (r, min) = (1.5, 20);
-        let nearest = |pts: &[DVec3], origin: DVec3| -> Vec<Vec<[i64; 3]>> {
-            let gids: Vec<u64> = pts.iter().map(|p| (p.x as u64) << 20 | (p.y as u64 & 0xFFFFF)).collect();
-            let cloud = Cloud::with_origin(pts, &gids, origin);
-            let at: Vec<DVec3> = (3..9).flat_map(|x| (3..9).map(move |y| DVec3::new(500_000.0 + x as f64 + 0.5, 5_400_000.0 + y as f64, 100.0))).collect();
-            let local: Vec<DVec3> = at.iter().map(|&q| q - origin).collect();
-            let key = |j: u32| (cloud.at(j as usize) + cloud.origin).round().as_i64vec3().to_array();
-            let nb = Neighbourhood { radius: r, reach: f64::INFINITY, min, max: 100, ordered: true };
-            let mut blocked = cloud.map_neighbourhoods_at(&local, nb, || (), |_, _, buf| buf.iter().map(|a| key(a.0)).collect::<Vec<_>>());
-            for (q, b) in local.iter().zip(&mut blocked) {
-                let mut one = Vec::new();
-                cloud.neighbours(*q, r, min, 100, &mut one);
-                assert_eq!(one.iter().map(|a| key(a.0)).collect::<Vec<_>>(), *b, "query by query");
-                b.sort();
-            }
-            blocked
-        };
-        let a = nearest(&world, DVec3::new(499_990.0, 5_399_990.0, 90.0));
-        world.reverse();
-        world.rotate_left(37);
-        let b = nearest(&world, DVec3::new(499_999.25, 5_399_993.5, 99.75));
-        assert!(a.iter().all(|v| v.len() == min));
-        let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
-        assert_eq!(differ, 0, "{differ} of {} neighbourhoods differ", a.len());
+        // (An unbounded reach widens each sparse ball on its own; a bounded one, as in a tile,
+        // from one wider list per block.)
+        for reach in [f64::INFINITY, 4.0] {
+            let nearest = |pts: &[DVec3], origin: DVec3| -> Vec<Vec<[i64; 3]>> {
+                let gids: Vec<u64> = pts.iter().map(|p| (p.x as u64) << 20 | (p.y as u64 & 0xFFFFF)).collect();
+                let cloud = Cloud::with_origin(pts, &gids, origin);
+                let at: Vec<DVec3> = (3..9).flat_map(|x| (3..9).map(move |y| DVec3::new(500_000.0 + x as f64 + 0.5, 5_400_000.0 + y as f64, 100.0))).collect();
+                let local: Vec<DVec3> = at.iter().map(|&q| q - origin).collect();
+                let key = |j: u32| (cloud.at(j as usize) + cloud.origin).round().as_i64vec3().to_array();
+                let nb = Neighbourhood { radius: r, reach, min, max: 100, ordered: true };
+                let mut blocked = cloud.map_neighbourhoods_at(&local, nb, || (), |_, _, buf| buf.iter().map(|a| key(a.0)).collect::<Vec<_>>());
+                for (q, b) in local.iter().zip(&mut blocked) {
+                    let mut one = Vec::new();
+                    cloud.neighbours_in(*q, nb, &mut one);
+                    assert_eq!(one.iter().map(|a| key(a.0)).collect::<Vec<_>>(), *b, "query by query");
+                    b.sort();
+                }
+                blocked
+            };
+            let a = nearest(&world, DVec3::new(499_990.0, 5_399_990.0, 90.0));
+            world.reverse();
+            world.rotate_left(37);
+            let b = nearest(&world, DVec3::new(499_999.25, 5_399_993.5, 99.75));
+            assert!(a.iter().all(|v| v.len() == min));
+            let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+            assert_eq!(differ, 0, "reach {reach}: {differ} of {} neighbourhoods differ", a.len());
+        }
     }
 
     #[test]
