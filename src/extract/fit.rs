@@ -235,6 +235,13 @@ impl Quadric {
     /// curvature terms are damped by `ridge` (relative to the data's spread) so that a
     /// one-sided or sparse neighbourhood falls back smoothly towards a plane.
     pub fn fit(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> Option<Quadric> {
+        Quadric::fit_over_plane(frame, points, ridge).0
+    }
+
+    /// As [`Quadric::fit`], also returning the weighted sum of squared heights over the
+    /// frame's plane (the plane's residual sum of squares, summed in the points' order), which
+    /// the same pass over the points gives.
+    pub fn fit_over_plane(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> (Option<Quadric>, f64) {
         // The normal equations' entries are weighted moments of the local coordinates,
         // sum w x^a y^b (a + b <= 4, 15 of them for the 21 entries of the upper triangle),
         // and sum w z x^a y^b (a + b <= 2) on the right: about half the products of
@@ -243,6 +250,7 @@ impl Quadric {
         let [mut m30, mut m21, mut m12, mut m03] = [0.0f64; 4];
         let [mut m40, mut m31, mut m22, mut m13, mut m04] = [0.0f64; 5];
         let mut b = [0.0f64; 6];
+        let mut plane_rss = 0.0;
         for (p, w) in points {
             let l = frame.local(p);
             let (x, y) = (l.x, l.y);
@@ -265,6 +273,7 @@ impl Quadric {
             m13 += wxy * yy;
             m04 += wyy * yy;
             let wz = w * l.z;
+            plane_rss += wz * l.z;
             b[0] += wz;
             b[1] += wz * x;
             b[2] += wz * y;
@@ -274,7 +283,7 @@ impl Quadric {
         }
         let sw = m00;
         if sw <= 0.0 {
-            return None;
+            return (None, plane_rss);
         }
         let scale2 = m20 + m02;
         #[rustfmt::skip]
@@ -294,8 +303,8 @@ impl Quadric {
         for i in 1..3 {
             m[(i, i)] += 1e-12 * sw * s2;
         }
-        let x = m.cholesky()?.solve(&b);
-        Some(Quadric { frame, a: [x[0], x[1], x[2], x[3], x[4], x[5]] })
+        let Some(x) = m.cholesky().map(|c| c.solve(&b)) else { return (None, plane_rss) };
+        (Some(Quadric { frame, a: [x[0], x[1], x[2], x[3], x[4], x[5]] }), plane_rss)
     }
 }
 

@@ -274,9 +274,15 @@ fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f
     }
     let plane = Quadric::plane(Frame::new(pca.mean, n));
     let rms = |q: &Quadric| (members.iter().map(|&j| q.value(pts[j]).powi(2)).sum::<f64>() / members.len() as f64).sqrt();
-    let rp = rms(&plane);
-    if rp > 0.2 * min_threshold && members.len() >= 12 {
-        if let Some(q) = Quadric::fit(plane.frame, members.iter().map(|&j| (pts[j], 1.0)), 1e-3) {
+    if members.len() < 12 {
+        return Some((plane, rms(&plane)));
+    }
+    // (The plane's RMS from the quadric's pass over the points: the same sum, in the same
+    // order, as `rms(&plane)`.)
+    let (curved, plane_rss) = Quadric::fit_over_plane(plane.frame, members.iter().map(|&j| (pts[j], 1.0)), 1e-3);
+    let rp = (plane_rss / members.len() as f64).sqrt();
+    if rp > 0.2 * min_threshold {
+        if let Some(q) = curved {
             let rq = rms(&q);
             let n = members.len() as f64;
             if (rp * rp - rq * rq) * (n - 6.0) > CURVATURE_F * 3.0 * rq * rq {
