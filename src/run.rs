@@ -466,11 +466,10 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         // idle for a moment of every tile.)
         let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
         let res = extract::candidates::residuals(&cloud, &which, r.fit_radius, halo);
-        let mut pairs: Vec<(u64, f32)> = which.par_iter().zip(&res).map(|(&i, &x)| (cloud.gid[i as usize], x)).collect();
-        pairs.par_sort_unstable_by_key(|p| p.0);
-        let mut out = Vec::with_capacity(pairs.len() * 12);
-        for (g, x) in pairs {
-            out.extend_from_slice(&g.to_le_bytes());
+        // (In the cloud's order, which the projection pass's load of the tile gives again.)
+        let mut out = Vec::with_capacity(which.len() * 12);
+        for (&i, x) in which.iter().zip(res) {
+            out.extend_from_slice(&cloud.gid[i as usize].to_le_bytes());
             out.extend_from_slice(&x.to_le_bytes());
         }
         Ok(out)
@@ -492,22 +491,29 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let edir = dir.join("edges");
     std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
     let time = tile_pass(&progress, "projection", &tiles, &edir, |t, idle| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq, idle), |t, (cloud, core)| {
-        let res = residuals_of(t)?;
-        // The core points' residuals, joined by global id (both sides sorted by it: a binary
-        // search per point cost more than the sort).
-        let mut core_ids: Vec<(u64, u32)> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).map(|i| (cloud.gid[i as usize], i)).collect();
-        core_ids.par_sort_unstable();
-        let mut cand = Vec::new();
-        let mut k = 0;
-        for (g, i) in core_ids {
-            while k < res.len() && res[k].0 < g {
-                k += 1;
+        let mut res = residuals_of(t)?;
+        // The core points' residuals, in the cloud's order as the residual pass wrote them (the
+        // tile loads the same way in both passes); joined by global id if not.
+        let core_pts: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
+        let same_order = res.len() == core_pts.len() && res.par_iter().zip(&core_pts).all(|(r, &i)| r.0 == cloud.gid[i as usize]);
+        let mut cand: Vec<u32> = Vec::new();
+        if same_order {
+            cand.extend(core_pts.iter().zip(&res).filter(|(_, r)| r.1 as f64 > tau).map(|(&i, _)| i));
+        } else {
+            let mut core_ids: Vec<(u64, u32)> = core_pts.iter().map(|&i| (cloud.gid[i as usize], i)).collect();
+            core_ids.par_sort_unstable();
+            res.par_sort_unstable_by_key(|r| r.0);
+            let mut k = 0;
+            for (g, i) in core_ids {
+                while k < res.len() && res[k].0 < g {
+                    k += 1;
+                }
+                if k < res.len() && res[k].0 == g && res[k].1 as f64 > tau {
+                    cand.push(i);
+                }
             }
-            if k < res.len() && res[k].0 == g && res[k].1 as f64 > tau {
-                cand.push(i);
-            }
+            cand.par_sort_unstable();
         }
-        cand.par_sort_unstable();
         if let Ok(d) = std::env::var("CREASE_DEBUG_DIR") {
             let pts: Vec<DVec3> = cand.iter().map(|&i| cloud.at(i as usize)).collect();
             extract::debug_dump(&d, &format!("candidates_{t}.obj"), &pts, cloud.origin);
