@@ -244,7 +244,13 @@ impl Cloud {
             return;
         }
         match self.rank.get() {
-            Some(rank) => out.sort_unstable_by_key(|a| rank[a.0 as usize]),
+            Some(rank) => {
+                // (Sorting packed keys, rank then position, is cheaper than comparing through
+                // the rank table; ranks are distinct, so the order is the same.)
+                let mut keys: Vec<u64> = out.iter().enumerate().map(|(k, a)| u64::from(rank[a.0 as usize]) << 32 | k as u64).collect();
+                keys.sort_unstable();
+                *out = keys.iter().map(|&k| out[(k & 0xFFFF_FFFF) as usize]).collect();
+            }
             None => out.sort_unstable_by(|a, b| self.coordinate_order(a.0, b.0)),
         }
         if out.len() > max {
