@@ -633,8 +633,6 @@ fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs) -> R
     Ok(())
 }
 
-/// Local origin of a loaded tile: the minimum corner of its points (fits are computed in f64,
-/// so the choice only moves the last bits).
 /// Indices of the points of `xyz` within `radius` of a point flagged in `centre` (and of some
 /// a little farther), in order; None (keep every point) if that is most of them anyway, or if
 /// the grid of cells this takes would be too large.
@@ -663,6 +661,8 @@ fn near(xyz: &[DVec3], centre: &[bool], radius: f64) -> Option<Vec<usize>> {
     (keep.len() * 4 < xyz.len() * 3).then_some(keep)
 }
 
+/// Local origin of a loaded tile: the minimum corner of its points (fits are computed in f64,
+/// so the choice only moves the last bits).
 fn tile_origin(tp: &TilePoints) -> DVec3 {
     tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
 }
@@ -707,7 +707,7 @@ fn tile_statistics(store: &Store, grid: &Grid, t: u32, first: (TilePoints, Vec<b
             }
             None => (Cloud::with_origin_parallel(&tp.xyz, &tp.gid, origin), sampled),
         };
-        let kept = keep.as_ref().map(|_| reach.unwrap_or(f64::INFINITY));
+        let kept = keep.as_ref().and(reach);
         let sample: Vec<usize> = (0..cloud.len()).into_par_iter().filter(|&i| sampled[cloud.ids[i] as usize]).collect();
         cloud.prepare_ordering(sample.len());
         let stats: Vec<Option<(f64, f64, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| extract::point_stats(&cloud, i, buf)).collect();

@@ -263,6 +263,14 @@ impl Cloud {
         }
     }
 
+    /// Sets `list` to every point within `r` of local position `c` (and a few just beyond), and
+    /// `coords` to their positions, side by side once: every position of a block scans them.
+    fn gather(&self, c: DVec3, r: f64, list: &mut Vec<(u32, f32)>, coords: &mut Coords) {
+        list.clear();
+        self.index.within(&c.as_vec3().to_array(), self.radius32(c, r), list);
+        coords.fill(list.iter().map(|&(j, _)| self.pos[j as usize]));
+    }
+
     /// Runs `f` on the neighbourhood (as [`Cloud::neighbours_in`] gives it) of every point in
     /// `which`, in parallel, returning the results in the order of `which` (see
     /// [`Cloud::map_neighbourhoods_at`]).
@@ -316,10 +324,7 @@ impl Cloud {
                     let b = chunk.iter().map(|o| at[o.1 as usize].distance(c)).fold(0.0, f64::max);
                     let blocked = b <= BLOCK_CELL * r;
                     if blocked {
-                        block.clear();
-                        self.index.within(&c.as_vec3().to_array(), self.radius32(c, r + b), block);
-                        // (Copied side by side once: every point of the block scans them.)
-                        bpos.fill(block.iter().map(|&(j, _)| self.pos[j as usize]));
+                        self.gather(c, r + b, block, bpos);
                     }
                     // The wider list a sparse neighbourhood is cut from: every point within
                     // `cap` of any position of the block, gathered for the first that needs it.
@@ -350,9 +355,7 @@ impl Cloud {
                                     // (One more tree query for the block, instead of two, a
                                     // ball and the nearest, for each sparse position.)
                                     if !wide_ready {
-                                        wide.clear();
-                                        self.index.within(&c.as_vec3().to_array(), self.radius32(c, b + cap), wide);
-                                        wpos.fill(wide.iter().map(|&(j, _)| self.pos[j as usize]));
+                                        self.gather(c, b + cap, wide, wpos);
                                         wide_ready = true;
                                     }
                                     wpos.within(wide, q, -1.0, cap * cap, out);
