@@ -461,7 +461,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let t = Instant::now();
     let rdir = dir.join("resid");
     std::fs::create_dir_all(&rdir).map_err(|e| Error::output(&rdir, e))?;
-    let time = tile_pass(&progress, "residuals", &tiles, &rdir, |t, idle| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq, idle), |_, (cloud, core)| {
+    let time = tile_pass(&progress, "residuals", &tiles, &rdir, |t, idle| load_cloud(&store, &grid, t, (halo, r.cell_side()), r.keep, r.seed, kq, idle), |_, (cloud, core)| {
         // (The per-point steps around the fits run on the pool too: serial, they left one core
         // idle for a moment of every tile.)
         let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
@@ -490,7 +490,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let t = Instant::now();
     let edir = dir.join("edges");
     std::fs::create_dir_all(&edir).map_err(|e| Error::output(&edir, e))?;
-    let time = tile_pass(&progress, "projection", &tiles, &edir, |t, idle| load_cloud(&store, &grid, t, halo, r.keep, r.seed, kq, idle), |t, (cloud, core)| {
+    let time = tile_pass(&progress, "projection", &tiles, &edir, |t, idle| load_cloud(&store, &grid, t, (halo, r.cell_side()), r.keep, r.seed, kq, idle), |t, (cloud, core)| {
         let mut res = residuals_of(t)?;
         // The core points' residuals, in the cloud's order as the residual pass wrote them (the
         // tile loads the same way in both passes); joined by global id if not.
@@ -708,6 +708,8 @@ fn tile_statistics(store: &Store, grid: &Grid, t: u32, first: (TilePoints, Vec<b
             None => (Cloud::with_origin_parallel(&tp.xyz, &tp.gid, origin), sampled),
         };
         let kept = keep.as_ref().and(reach);
+        // (The tree, on the pool, which would otherwise wait for it.)
+        cloud.index();
         let sample: Vec<usize> = (0..cloud.len()).into_par_iter().filter(|&i| sampled[cloud.ids[i] as usize]).collect();
         cloud.prepare_ordering(sample.len());
         let stats: Vec<Option<(f64, f64, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| extract::point_stats(&cloud, i, buf)).collect();
@@ -751,14 +753,13 @@ fn tile_statistics(store: &Store, grid: &Grid, t: u32, first: (TilePoints, Vec<b
 /// what the widest halo holds.
 const STATS_HALO_GROWTH: f64 = 4.0;
 
-/// Loads tile `t` with its halo (see [`load`]) and indexes it, on the rayon pool if `idle`
+/// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells of side `side`, on the rayon pool if `idle`
 /// says that the pool has nothing else to do (the same cloud either way).
 #[allow(clippy::too_many_arguments)]
-fn load_cloud(store: &Store, grid: &Grid, t: u32, halo: f64, keep: f64, seed: u64, kq: f64, idle: bool) -> Result<(Cloud, Vec<bool>)> {
+fn load_cloud(store: &Store, grid: &Grid, t: u32, (halo, side): (f64, f64), keep: f64, seed: u64, kq: f64, idle: bool) -> Result<(Cloud, Vec<bool>)> {
     let (tp, core) = load(store, grid, t, halo, keep, seed, kq)?;
     let origin = tile_origin(&tp);
-    let cloud = if idle { Cloud::with_origin_parallel(&tp.xyz, &tp.gid, origin) } else { Cloud::with_origin(&tp.xyz, &tp.gid, origin) };
-    Ok((cloud, core))
+    Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, side, idle), core))
 }
 
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by id hash); the

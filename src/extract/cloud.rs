@@ -1,25 +1,30 @@
-//! The point set a stage works on: f32 coordinates local to an f64 origin, with a k-d tree.
+//! The point set a stage works on: coordinates local to an f64 origin, indexed by a k-d tree
+//! (built on first use) or stored by the cells of a grid.
 
 use crate::spatial::Index;
 use glam::DVec3;
 
 /// Points of one tile (core and halo) in local coordinates, indexed for neighbour queries.
-/// Points are stored in Morton (Z-curve) order so that consecutive points are spatial
-/// neighbours and per-point queries stay in cache; `ids` maps back to the caller's order.
+/// Points are stored in Morton (Z-curve) order, or cell by cell in a grid (see [`Cells`]), so
+/// that consecutive points are spatial neighbours and per-point queries stay in cache; `ids`
+/// maps back to the caller's order.
 pub struct Cloud {
     /// World position of the local origin.
     pub origin: DVec3,
-    /// Local coordinates in f32 (for the tree), in Morton order.
-    pub points: Vec<[f32; 3]>,
-    /// The same in f64: fits use these, so results do not depend on where the origin is
-    /// beyond the last bits (f32 rounding would depend on it).
+    /// Local coordinates in f64: fits use these, so results do not depend on where the
+    /// origin is beyond the last bits (f32 rounding would depend on it).
     pub pos: Vec<DVec3>,
     /// For each stored point, its index in the input slice.
     pub ids: Vec<u32>,
     /// For each stored point, its global identity (stable across tilings).
     pub gid: Vec<u64>,
-    /// Neighbour index over `points`.
-    pub index: Index,
+    /// The k-d tree over the points' f32 coordinates, built on first use (see
+    /// [`Cloud::index`]): a gridded cloud's blocks of neighbourhoods never need it.
+    index: std::sync::OnceLock<Index>,
+    /// Whether a tree built on first use may be built on the rayon pool.
+    parallel: bool,
+    /// The grid the points are stored by, if gridded (see [`Cloud::gridded`]).
+    cells: Option<Cells>,
     /// Each point's rank in coordinate order (x, then y, then z, then global id), if built
     /// (see [`Cloud::prepare_ordering`]): comparing two ranks is far cheaper than comparing
     /// coordinates.
@@ -66,46 +71,78 @@ impl Cloud {
 
     /// Builds a cloud from world positions and their global ids, with a given origin.
     pub fn with_origin(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
-        Cloud::build(world, gids, origin, false)
+        Cloud::build(world, gids, origin, false, None)
     }
 
-    /// As [`Cloud::with_origin`], with the sort and the tree built on the rayon pool (for a
-    /// caller whose pool has nothing else to do meanwhile). The cloud is the same.
+    /// As [`Cloud::with_origin`], with the sort (and the tree, once needed) built on the rayon
+    /// pool (for a caller whose pool has nothing else to do meanwhile). The cloud is the same.
     pub fn with_origin_parallel(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
-        Cloud::build(world, gids, origin, true)
+        Cloud::build(world, gids, origin, true, None)
     }
 
-    fn build(world: &[DVec3], gids: &[u64], origin: DVec3, parallel: bool) -> Cloud {
+    /// As [`Cloud::with_origin`], with the points stored cell by cell in a grid of cubes of
+    /// side `side`: [`Cloud::map_neighbourhoods`] then gathers each block's points from the
+    /// grid, and builds no tree. Two gridded clouds of the same points and side store them in
+    /// the same order. Sorted and indexed on the rayon pool if `parallel`.
+    pub fn gridded(world: &[DVec3], gids: &[u64], origin: DVec3, side: f64, parallel: bool) -> Cloud {
+        Cloud::build(world, gids, origin, parallel, Some(side))
+    }
+
+    fn build(world: &[DVec3], gids: &[u64], origin: DVec3, parallel: bool, side: Option<f64>) -> Cloud {
         use rayon::prelude::*;
         let ext = world.iter().fold(0.0f64, |m, p| m.max((*p - origin).max_element()));
-        let q = if ext > 0.0 { ((1u64 << 21) - 1) as f64 / ext } else { 0.0 };
-        let code = |p: DVec3| {
-            let l = ((p - origin) * q).max(DVec3::ZERO);
-            spread(l.x as u64) | spread(l.y as u64) << 1 | spread(l.z as u64) << 2
+        let mut order: Vec<(u64, u32)> = match side {
+            Some(side) => {
+                let cells = Cells::new(side, ext);
+                world.iter().enumerate().map(|(i, p)| (cells.key(*p - origin), i as u32)).collect()
+            }
+            None => {
+                let q = if ext > 0.0 { ((1u64 << 21) - 1) as f64 / ext } else { 0.0 };
+                let code = |p: DVec3| {
+                    let l = ((p - origin) * q).max(DVec3::ZERO);
+                    spread(l.x as u64) | spread(l.y as u64) << 1 | spread(l.z as u64) << 2
+                };
+                world.iter().enumerate().map(|(i, p)| (code(*p), i as u32)).collect()
+            }
         };
-        let mut order: Vec<(u64, u32)> = world.iter().enumerate().map(|(i, p)| (code(*p), i as u32)).collect();
         if parallel {
             order.par_sort_unstable();
         } else {
             order.sort_unstable();
         }
+        let cells = side.map(|side| {
+            let mut c = Cells::new(side, ext);
+            c.index(order.iter().map(|o| o.0));
+            c
+        });
         let ids: Vec<u32> = order.iter().map(|o| o.1).collect();
         let pos: Vec<DVec3> = ids.iter().map(|&i| world[i as usize] - origin).collect();
-        let points: Vec<[f32; 3]> = pos.iter().map(|p| p.as_vec3().to_array()).collect();
         let gid: Vec<u64> = ids.iter().map(|&i| gids[i as usize]).collect();
-        let index = if parallel { Index::new_parallel(&points) } else { Index::new(&points) };
         let slack = rounding_slack(pos.iter().fold(0.0f64, |m, p| m.max(p.abs().max_element())));
-        Cloud { origin, points, pos, ids, gid, index, rank: std::sync::OnceLock::new(), slack }
+        Cloud { origin, pos, ids, gid, index: std::sync::OnceLock::new(), parallel, cells, rank: std::sync::OnceLock::new(), slack }
+    }
+
+    /// The k-d tree over the points (built on first use: call it outside a parallel section
+    /// to have a large tree built in parallel).
+    pub fn index(&self) -> &Index {
+        self.index.get_or_init(|| {
+            let points: Vec<[f32; 3]> = self.pos.iter().map(|p| p.as_vec3().to_array()).collect();
+            if self.parallel {
+                Index::new_parallel(&points)
+            } else {
+                Index::new(&points)
+            }
+        })
     }
 
     /// Number of points.
     pub fn len(&self) -> usize {
-        self.points.len()
+        self.pos.len()
     }
 
     /// True if there is no point.
     pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
+        self.pos.is_empty()
     }
 
     /// Local position of point `i` in f64.
@@ -122,7 +159,7 @@ impl Cloud {
     /// Number of points within `r` of local position `q` (membership decided in f64).
     pub fn count_within(&self, q: DVec3, r: f64, buf: &mut Vec<(u32, f32)>) -> usize {
         buf.clear();
-        self.index.within(&q.as_vec3().to_array(), self.radius32(q, r), buf);
+        self.index().within(&q.as_vec3().to_array(), self.radius32(q, r), buf);
         buf.iter().filter(|a| self.pos[a.0 as usize].distance_squared(q) <= r * r).count()
     }
 
@@ -143,7 +180,7 @@ impl Cloud {
         out.clear();
         // Query the f32 tree a little wide, then decide membership in f64, so the ball holds
         // the same points wherever the tile's origin lies.
-        self.index.within(&q.as_vec3().to_array(), self.radius32(q, r), out);
+        self.index().within(&q.as_vec3().to_array(), self.radius32(q, r), out);
         let r2 = r * r;
         out.retain_mut(|a| {
             let d2 = self.pos[a.0 as usize].distance_squared(q);
@@ -153,7 +190,7 @@ impl Cloud {
         if out.len() < min {
             out.clear();
             // (A few more than `min` from the f32 tree: the f64 order of the nearest may differ.)
-            self.index.nearest_n(&q.as_vec3().to_array(), min + 8, out);
+            self.index().nearest_n(&q.as_vec3().to_array(), min + 8, out);
             self.keep_nearest(q, r, reach, min, out);
         }
         self.order_and_thin(max, ordered, out);
@@ -267,8 +304,22 @@ impl Cloud {
     /// `coords` to their positions, side by side once: every position of a block scans them.
     fn gather(&self, c: DVec3, r: f64, list: &mut Vec<(u32, f32)>, coords: &mut Coords) {
         list.clear();
-        self.index.within(&c.as_vec3().to_array(), self.radius32(c, r), list);
-        coords.fill(list.iter().map(|&(j, _)| self.pos[j as usize]));
+        match &self.cells {
+            Some(cells) => {
+                coords.clear();
+                // (A little wide: membership is decided for each position of the block.)
+                let r = r * (1.0 + 1e-9) + self.slack;
+                cells.runs(c, r, |run| {
+                    list.extend(run.clone().map(|j| (j as u32, 0.0)));
+                    coords.extend(&self.pos[run]);
+                });
+                coords.keep_within(c, r * r, list);
+            }
+            None => {
+                self.index().within(&c.as_vec3().to_array(), self.radius32(c, r), list);
+                coords.fill(list.iter().map(|&(j, _)| self.pos[j as usize]));
+            }
+        }
     }
 
     /// Runs `f` on the neighbourhood (as [`Cloud::neighbours_in`] gives it) of every point in
@@ -287,9 +338,10 @@ impl Cloud {
 
     /// Runs `f` on the neighbourhood (as [`Cloud::neighbours_in`] gives it) of every local
     /// position in `at`, in parallel, passing its index in `at` and returning the results in
-    /// that order. The positions are taken in blocks, those in one cell of a grid whose cells
-    /// are 1.5 ball radii wide (`BLOCK_CELL`): one tree query around a block, wide enough for all its
-    /// positions, then each position's ball is cut from that list; a sparse ball is widened
+    /// that order. The positions are taken in blocks, those in one cell of a grid (the cloud's,
+    /// if gridded; else one whose cells are 1.5 ball radii wide, `BLOCK_CELL`): the points
+    /// within reach of all of a block's positions are gathered once (from the grid, or by one
+    /// tree query), then each position's ball is cut from that list; a sparse ball is widened
     /// from a second, wider list of the block (gathered once, for the first that needs it).
     /// This gives the same sets as a query per position at a fraction of the cost.
     pub fn map_neighbourhoods_at<T: Send, S>(
@@ -305,10 +357,26 @@ impl Cloud {
         if ordered {
             self.prepare_ordering(at.len());
         }
-        let cell = |q: DVec3| (q / (BLOCK_CELL * r)).floor().as_i64vec3().to_array();
-        let mut order: Vec<([i64; 3], u32)> = at.iter().enumerate().map(|(k, &q)| (cell(q), k as u32)).collect();
-        order.par_sort_unstable();
-        let mut blocks: Vec<&[([i64; 3], u32)]> = Vec::new();
+        // Positions by block key. (A gridded cloud's own points come in key order already: then
+        // nothing is sorted, and the results come out in order.)
+        let mut order: Vec<(u64, u32)> = match &self.cells {
+            Some(cells) => at.par_iter().enumerate().map(|(k, &q)| (cells.key(q), k as u32)).collect(),
+            None => {
+                let cell = |q: DVec3| (q / (BLOCK_CELL * r)).floor().as_i64vec3().to_array();
+                let mut by: Vec<([i64; 3], u32)> = at.iter().enumerate().map(|(k, &q)| (cell(q), k as u32)).collect();
+                by.par_sort_unstable();
+                let mut id = 0u64;
+                by.iter().enumerate().map(|(n, o)| {
+                    id += (n > 0 && o.0 != by[n - 1].0) as u64;
+                    (id, o.1)
+                }).collect()
+            }
+        };
+        if !order.windows(2).all(|w| w[0] < w[1]) {
+            order.par_sort_unstable();
+        }
+        let in_order = order.windows(2).all(|w| w[0].1 < w[1].1);
+        let mut blocks: Vec<&[(u64, u32)]> = Vec::new();
         let mut rest = &order[..];
         while !rest.is_empty() {
             let n = rest.iter().take(MAX_BLOCK).take_while(|o| o.0 == rest[0].0).count();
@@ -322,7 +390,9 @@ impl Cloud {
                 |(state, block, bpos, out, d2s, (wide, wpos)), chunk| {
                     let c = chunk.iter().map(|o| at[o.1 as usize]).sum::<DVec3>() / chunk.len() as f64;
                     let b = chunk.iter().map(|o| at[o.1 as usize].distance(c)).fold(0.0, f64::max);
-                    let blocked = b <= BLOCK_CELL * r;
+                    // (A grid holds every block's points; a tree query for a wide block would
+                    // return too long a list.)
+                    let blocked = self.cells.is_some() || b <= BLOCK_CELL * r;
                     if blocked {
                         self.gather(c, r + b, block, bpos);
                     }
@@ -370,8 +440,82 @@ impl Cloud {
             )
             .flatten_iter()
             .collect();
-        done.par_sort_unstable_by_key(|d| d.0);
+        if !in_order {
+            done.par_sort_unstable_by_key(|d| d.0);
+        }
         done.into_iter().map(|d| d.1).collect()
+    }
+}
+
+/// A grid of cubic cells over a cloud's local coordinates (which are non-negative): the
+/// sorted keys of the cells that hold points, and where each one's points start, the points
+/// being stored cell by cell. Cells are keyed x, then y, then z, so the cells of one column
+/// (x, y) over a range of z hold one run of points.
+struct Cells {
+    side: f64,
+    /// Largest cell coordinate on any axis (coordinates beyond are clamped to it).
+    last: i64,
+    keys: Vec<u64>,
+    /// Index of each cell's first point, and one past the last point of the last cell.
+    start: Vec<u32>,
+}
+
+impl Cells {
+    /// Cell coordinates take 21 bits each in a key.
+    const BITS: u32 = 21;
+
+    /// An empty grid of cells of side `side` (widened if need be so that `extent` spans no
+    /// more cells than a key holds).
+    fn new(side: f64, extent: f64) -> Cells {
+        let most = ((1i64 << Self::BITS) - 1) as f64;
+        let side = side.max(extent / most).max(f64::MIN_POSITIVE);
+        Cells { side, last: (1 << Self::BITS) - 1, keys: Vec::new(), start: Vec::new() }
+    }
+
+    /// Cell coordinates of local position `q`, clamped to the grid.
+    fn cell(&self, q: DVec3) -> [i64; 3] {
+        (q / self.side).floor().as_i64vec3().to_array().map(|c| c.clamp(0, self.last))
+    }
+
+    fn pack(c: [i64; 3]) -> u64 {
+        (c[0] as u64) << (2 * Self::BITS) | (c[1] as u64) << Self::BITS | c[2] as u64
+    }
+
+    /// Key of the cell holding local position `q`.
+    fn key(&self, q: DVec3) -> u64 {
+        Self::pack(self.cell(q))
+    }
+
+    /// Records the cells of points stored with these (sorted) keys.
+    fn index(&mut self, sorted: impl Iterator<Item = u64>) {
+        let mut n = 0u32;
+        for k in sorted {
+            if self.keys.last() != Some(&k) {
+                self.keys.push(k);
+                self.start.push(n);
+            }
+            n += 1;
+        }
+        self.start.push(n);
+    }
+
+    /// Calls `f` with each run of points (as a range of stored indices) in the cells that
+    /// meet the box of half-side `r` around `c`, column by column.
+    fn runs(&self, c: DVec3, r: f64, mut f: impl FnMut(std::ops::Range<usize>)) {
+        let (lo, hi) = (self.cell(c - DVec3::splat(r)), self.cell(c + DVec3::splat(r)));
+        for x in lo[0]..=hi[0] {
+            for y in lo[1]..=hi[1] {
+                let (first, end) = (Self::pack([x, y, lo[2]]), Self::pack([x, y, hi[2]]));
+                let a = self.keys.partition_point(|&k| k < first);
+                let mut b = a;
+                while b < self.keys.len() && self.keys[b] <= end {
+                    b += 1;
+                }
+                if b > a {
+                    f(self.start[a] as usize..self.start[b] as usize);
+                }
+            }
+        }
     }
 }
 
@@ -387,6 +531,45 @@ struct Coords {
 }
 
 impl Coords {
+    fn clear(&mut self) {
+        self.x.clear();
+        self.y.clear();
+        self.z.clear();
+    }
+
+    fn extend(&mut self, pos: &[DVec3]) {
+        self.x.extend(pos.iter().map(|p| p.x));
+        self.y.extend(pos.iter().map(|p| p.y));
+        self.z.extend(pos.iter().map(|p| p.z));
+    }
+
+    /// Squared distances from `q` of every position, into `d2`.
+    fn distances(&mut self, q: DVec3) {
+        self.d2.clear();
+        self.d2.extend(self.x.iter().zip(&self.y).zip(&self.z).map(|((&x, &y), &z)| {
+            let (dx, dy, dz) = (x - q.x, y - q.y, z - q.z);
+            dx * dx + dy * dy + dz * dz
+        }));
+    }
+
+    /// Keeps the positions (and the entries of `list`, whose positions they are) at squared
+    /// distance at most `r2` from `q`, in order.
+    fn keep_within(&mut self, q: DVec3, r2: f64, list: &mut Vec<(u32, f32)>) {
+        self.distances(q);
+        // (Branch-free, as in `within`.)
+        let mut len = 0;
+        for k in 0..self.d2.len() {
+            let d2 = self.d2[k];
+            (self.x[len], self.y[len], self.z[len]) = (self.x[k], self.y[k], self.z[k]);
+            list[len] = (list[k].0, d2 as f32);
+            len += (d2 <= r2) as usize;
+        }
+        for v in [&mut self.x, &mut self.y, &mut self.z] {
+            v.truncate(len);
+        }
+        list.truncate(len);
+    }
+
     fn fill(&mut self, pos: impl Iterator<Item = DVec3>) {
         self.x.clear();
         self.y.clear();
@@ -402,11 +585,7 @@ impl Coords {
     /// from `q` above `lo2` (negative for none) and at most `hi2`, in list order.
     fn within(&mut self, list: &[(u32, f32)], q: DVec3, lo2: f64, hi2: f64, out: &mut Vec<(u32, f32)>) {
         let n = self.x.len();
-        self.d2.clear();
-        self.d2.extend(self.x.iter().zip(&self.y).zip(&self.z).map(|((&x, &y), &z)| {
-            let (dx, dy, dz) = (x - q.x, y - q.y, z - q.z);
-            dx * dx + dy * dy + dz * dz
-        }));
+        self.distances(q);
         // Branch-free compaction: every entry is written, and kept by advancing past it.
         out.clear();
         out.resize(n, (0, 0.0));
@@ -449,6 +628,14 @@ pub struct Neighbourhood {
 mod tests {
     use super::*;
 
+    /// The points as a tree-indexed cloud, and gridded with cells far narrower than, about as
+    /// wide as, and far wider than a ball of radius `r`.
+    fn clouds(world: &[DVec3], gids: &[u64], origin: DVec3, r: f64) -> Vec<Cloud> {
+        let mut v = vec![Cloud::with_origin(world, gids, origin)];
+        v.extend([0.3, 1.5, 4.0].map(|s| Cloud::gridded(world, gids, origin, s * r, false)));
+        v
+    }
+
     #[test]
     fn ordered_neighbourhoods_are_the_same_with_and_without_the_coordinate_ranks() {
         // A jittered grid with repeated coordinates (ties broken by global id), and a cell
@@ -459,7 +646,7 @@ mod tests {
             world.push(world[k * 3]);
         }
         let gids: Vec<u64> = (0..world.len() as u64).rev().collect();
-        let cloud = Cloud::with_origin(&world, &gids, DVec3::new(-1.0, -1.0, -1.0));
+        for cloud in clouds(&world, &gids, DVec3::new(-1.0, -1.0, -1.0), 0.6) {
         let which: Vec<u32> = (0..cloud.len() as u32).step_by(7).collect();
         let plain: Vec<Vec<(u32, f32)>> = which
             .iter()
@@ -486,6 +673,7 @@ mod tests {
             };
             assert!(b.windows(2).all(|w| by_cmp(w[0].0, w[1].0).is_lt()));
         }
+        }
     }
 
     #[test]
@@ -504,7 +692,8 @@ mod tests {
         for reach in [f64::INFINITY, 4.0] {
             let nearest = |pts: &[DVec3], origin: DVec3| -> Vec<Vec<[i64; 3]>> {
                 let gids: Vec<u64> = pts.iter().map(|p| (p.x as u64) << 20 | (p.y as u64 & 0xFFFFF)).collect();
-                let cloud = Cloud::with_origin(pts, &gids, origin);
+                let mut per_cloud = Vec::new();
+                for cloud in clouds(pts, &gids, origin, r) {
                 let at: Vec<DVec3> = (3..9).flat_map(|x| (3..9).map(move |y| DVec3::new(500_000.0 + x as f64 + 0.5, 5_400_000.0 + y as f64, 100.0))).collect();
                 let local: Vec<DVec3> = at.iter().map(|&q| q - origin).collect();
                 let key = |j: u32| (cloud.at(j as usize) + cloud.origin).round().as_i64vec3().to_array();
@@ -516,7 +705,10 @@ mod tests {
                     assert_eq!(one.iter().map(|a| key(a.0)).collect::<Vec<_>>(), *b, "query by query");
                     b.sort();
                 }
-                blocked
+                per_cloud.push(blocked);
+                }
+                assert!(per_cloud.iter().all(|b| *b == per_cloud[0]), "tree-indexed and gridded clouds differ");
+                per_cloud.swap_remove(0)
             };
             let a = nearest(&world, DVec3::new(499_990.0, 5_399_990.0, 90.0));
             world.reverse();
@@ -560,7 +752,8 @@ mod tests {
         // sqrt(5), and within reach 2 there are 13 (the ring at distance 2 included). A reach
         // below the radius does not shrink the ball.
         let world: Vec<DVec3> = (0..144).map(|k| DVec3::new((k % 12) as f64, (k / 12) as f64, 0.0)).collect();
-        let cloud = Cloud::new(&world);
+        let gids: Vec<u64> = (0..world.len() as u64).collect();
+        for cloud in clouds(&world, &gids, DVec3::ZERO, 1.5) {
         let at: Vec<DVec3> = (4..8).flat_map(|x| (4..8).map(move |y| DVec3::new(x as f64, y as f64, 0.0))).collect();
         for (reach, count) in [(f64::INFINITY, 20), (2.0, 13), (1.0, 9)] {
             let nb = Neighbourhood { radius: 1.5, reach, min: 20, max: 100, ordered: true };
@@ -572,6 +765,7 @@ mod tests {
                 assert_eq!(b.len(), count, "reach {reach} at {q}");
                 assert!(b.iter().all(|a| (a.1 as f64) <= reach.max(1.5).powi(2) + 1e-9), "reach {reach} at {q}");
             }
+        }
         }
     }
 }

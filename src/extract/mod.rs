@@ -91,6 +91,14 @@ impl Resolved {
     pub fn halo(&self) -> f64 {
         1.25 * self.fit_radius.max(self.rmls_radius)
     }
+
+    /// Side of the grid cells a tile's cloud is stored by for stages 1-2 (see
+    /// [`Cloud::gridded`]): the same for both, so that the two passes load a tile in the same
+    /// order, and close to 1.5 radii of each (the block size that made the fewest instructions:
+    /// see `BLOCK_CELL` in `cloud.rs`).
+    pub fn cell_side(&self) -> f64 {
+        1.5 * (self.fit_radius * self.rmls_radius).sqrt()
+    }
 }
 
 impl Params {
@@ -209,7 +217,7 @@ pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option
     // (A few more than K + 1 from the f32 tree, whose distances depend on the tile's origin in
     // their last bits; the K-th neighbour's distance is then taken in f64, from the f64
     // positions, so it is the same in every tile.)
-    cloud.index.nearest_n(&cloud.points[i], K + 1 + 8, buf);
+    cloud.index().nearest_n(&cloud.at(i).as_vec3().to_array(), K + 1 + 8, buf);
     if buf.len() < K + 1 {
         return None;
     }
@@ -480,9 +488,9 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
         let keep: Vec<usize> = (0..points.len()).filter(|&i| keep_point(position_key(points[i], kq), r.keep, r.seed)).collect();
         let kept: Vec<DVec3> = keep.iter().map(|&i| points[i]).collect();
         let kept_ids: Vec<u64> = keep.iter().map(|&i| gids[i]).collect();
-        Cloud::with_origin(&kept, &kept_ids, full.origin)
+        Cloud::gridded(&kept, &kept_ids, full.origin, r.cell_side(), true)
     } else {
-        full
+        Cloud::gridded(points, &gids, full.origin, r.cell_side(), true)
     };
     seconds.index = t.elapsed().as_secs_f64();
 
