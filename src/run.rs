@@ -567,12 +567,21 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     for &(t, lo, hi) in &boxes {
         let (lo, hi) = (lo - DVec3::splat(reach), hi + DVec3::splat(reach));
         let inside = |p: DVec3| p.cmpge(lo).all() && p.cmple(hi).all();
-        let (own, _, _, _) = load_edges(t)?;
-        let mut block: Vec<DVec3> = own.iter().map(|e| e.p - origin).collect();
-        for &(u, ulo, uhi) in &boxes {
-            if u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all() {
-                block.extend(load_edges(u)?.0.iter().filter(|e| inside(e.p)).map(|e| e.p - origin));
-            }
+        // (Decoded on the pool, which waits for them: the tile's edge points, then those of
+        // its neighbours within reach, in order.)
+        let near: Vec<u32> = std::iter::once(t).chain(boxes.iter().filter(|&&(u, ulo, uhi)| u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all()).map(|b| b.0)).collect();
+        let mut parts: Vec<(Vec<WorldEdge>, Vec<DVec3>)> = near
+            .par_iter()
+            .map(|&u| {
+                let e = load_edges(u)?.0;
+                let p = if u == t { e.iter().map(|e| e.p - origin).collect() } else { e.iter().filter(|e| inside(e.p)).map(|e| e.p - origin).collect() };
+                Ok((if u == t { e } else { vec![] }, p))
+            })
+            .collect::<Result<_>>()?;
+        let own = std::mem::take(&mut parts[0].0);
+        let mut block: Vec<DVec3> = Vec::with_capacity(parts.iter().map(|p| p.1.len()).sum());
+        for (_, p) in parts {
+            block.extend(p);
         }
         if debug.is_some() {
             debug_edges.extend_from_slice(&block[..own.len()]);

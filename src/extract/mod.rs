@@ -397,8 +397,11 @@ pub fn curves_from_smoothed(points: Vec<DVec3>, normals: Vec<[glam::Vec3; 2]>, g
     // edge cloud is the one part of a run that grows with the whole input, not with a tile:
     // it is reordered through a permutation rather than as records, so that at most one
     // extra copy of one of its columns exists at a time.)
+    use rayon::prelude::*;
     let mut perm: Vec<u32> = (0..points.len() as u32).collect();
-    perm.sort_unstable_by(|&a, &b| {
+    // (Points equal in position and normals are interchangeable: the unstable order of
+    // such ties changes nothing.)
+    perm.par_sort_unstable_by(|&a, &b| {
         let (a, b) = (a as usize, b as usize);
         pos_key(points[a]).cmp(&pos_key(points[b])).then(normal_key(&normals[a]).cmp(&normal_key(&normals[b])))
     });
@@ -410,7 +413,7 @@ pub fn curves_from_smoothed(points: Vec<DVec3>, normals: Vec<[glam::Vec3; 2]>, g
         debug_dump(&dir, "corners.obj", grouped, origin);
     }
     let t = Instant::now();
-    let index = (!points.is_empty()).then(|| Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
+    let index = (!points.is_empty()).then(|| Index::new_parallel(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
     let grown = index.as_ref().map_or(vec![], |ix| grow::grow(&points, ix, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg }));
     counts.grown = grown.len() as u64;
     if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
