@@ -9,7 +9,6 @@ use crate::cloud::{Bounds, PointChunk};
 use crate::error::{Error, Result};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
@@ -246,7 +245,8 @@ const SUB_CELLS: f64 = 16.0;
 pub struct Bucketer<'a> {
     grid: &'a Grid,
     store: &'a Store,
-    buffers: HashMap<u32, TilePoints>,
+    /// One buffer per tile (a vector, not a map: it is looked up for every point read).
+    buffers: Vec<TilePoints>,
     buffered: usize,
     budget: usize,
     /// Points bucketed per tile.
@@ -256,14 +256,14 @@ pub struct Bucketer<'a> {
 impl<'a> Bucketer<'a> {
     /// A bucketer holding at most `budget` points in memory.
     pub fn new(grid: &'a Grid, store: &'a Store, budget: usize) -> Self {
-        Bucketer { grid, store, buffers: HashMap::new(), buffered: 0, budget: budget.max(1024), counts: vec![0; grid.len()] }
+        Bucketer { grid, store, buffers: vec![TilePoints::default(); grid.len()], buffered: 0, budget: budget.max(1024), counts: vec![0; grid.len()] }
     }
 
     /// Adds a chunk of points; `gid0` is the global id of the chunk's first point.
     pub fn add(&mut self, chunk: &PointChunk, gids: &[u64]) -> Result<()> {
         for (p, &g) in chunk.xyz.iter().zip(gids) {
             let t = self.grid.tile_of(*p);
-            let b = self.buffers.entry(t).or_default();
+            let b = &mut self.buffers[t as usize];
             b.xyz.push(*p);
             b.gid.push(g);
             self.counts[t as usize] += 1;
@@ -278,8 +278,7 @@ impl<'a> Bucketer<'a> {
     /// Writes every buffer out.
     pub fn flush(&mut self) -> Result<()> {
         use rayon::prelude::*;
-        let mut tiles: Vec<(u32, TilePoints)> = self.buffers.drain().collect();
-        tiles.sort_unstable_by_key(|t| t.0);
+        let tiles: Vec<(u32, TilePoints)> = self.buffers.iter_mut().enumerate().filter(|(_, b)| !b.xyz.is_empty()).map(|(t, b)| (t as u32, std::mem::take(b))).collect();
         let sub = self.grid.size / SUB_CELLS;
         let o = DVec3::from(self.grid.origin);
         // Tiles are separate files: they are sorted, compressed and written in parallel.
