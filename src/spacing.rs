@@ -12,7 +12,8 @@ fn median_kth_distance(points: &[DVec3], k: usize, samples: usize) -> f64 {
     }
     let origin = points[0];
     let local: Vec<[f32; 3]> = points.iter().map(|p| (*p - origin).as_vec3().to_array()).collect();
-    let index = Index::new(&local);
+    // (Built in parallel: the whole of the fullest tile, while the pool has nothing to do.)
+    let index = Index::new_parallel(&local);
     let step = (points.len() / samples.max(1)).max(1);
     let mut d: Vec<f32> = Vec::new();
     let mut nn = Vec::new();

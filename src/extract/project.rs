@@ -257,8 +257,14 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
         frame = q.frame;
         threshold = (3.0 * rms).max(min_threshold).min(threshold);
     }
+    // (The inliers are a subsequence of the remaining points, in the same order: one merge.)
+    let mut k = 0;
     let inl = &s.inl;
-    s.remaining.retain(|j| inl.binary_search(j).is_err());
+    s.remaining.retain(|&j| {
+        let inlier = k < inl.len() && inl[k] == j;
+        k += inlier as usize;
+        !inlier
+    });
     Some(Surface { quad, threshold })
 }
 
