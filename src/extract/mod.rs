@@ -497,6 +497,8 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
     } else {
         Cloud::gridded(points, &gids, full.origin, r.cell_side(), true)
     };
+    // (The statistics' cloud, in Morton order with its tree, is not needed past here.)
+    drop(full);
     seconds.index = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
