@@ -567,20 +567,19 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     for &(t, lo, hi) in &boxes {
         let (lo, hi) = (lo - DVec3::splat(reach), hi + DVec3::splat(reach));
         let inside = |p: DVec3| p.cmpge(lo).all() && p.cmple(hi).all();
-        // (Decoded on the pool, which waits for them: the tile's edge points, then those of
-        // its neighbours within reach, in order.)
-        let near: Vec<u32> = std::iter::once(t).chain(boxes.iter().filter(|&&(u, ulo, uhi)| u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all()).map(|b| b.0)).collect();
-        let mut parts: Vec<(Vec<WorldEdge>, Vec<DVec3>)> = near
-            .par_iter()
-            .map(|&u| {
-                let e = load_edges(u)?.0;
-                let p = if u == t { e.iter().map(|e| e.p - origin).collect() } else { e.iter().filter(|e| inside(e.p)).map(|e| e.p - origin).collect() };
-                Ok((if u == t { e } else { vec![] }, p))
-            })
-            .collect::<Result<_>>()?;
-        let own = std::mem::take(&mut parts[0].0);
-        let mut block: Vec<DVec3> = Vec::with_capacity(parts.iter().map(|p| p.1.len()).sum());
-        for (_, p) in parts {
+        // (Decoded on the pool, which waits for them: the tile's edge points, and those of its
+        // neighbours within reach, in order.)
+        let (own, context) = rayon::join(
+            || load_edges(t),
+            || {
+                let near: Vec<u32> = boxes.iter().filter(|&&(u, ulo, uhi)| u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all()).map(|b| b.0).collect();
+                near.par_iter().map(|&u| Ok(load_edges(u)?.0.iter().filter(|e| inside(e.p)).map(|e| e.p - origin).collect::<Vec<_>>())).collect::<Result<Vec<_>>>()
+            },
+        );
+        let (own, context) = (own?.0, context?);
+        let mut block: Vec<DVec3> = Vec::with_capacity(own.len() + context.iter().map(Vec::len).sum::<usize>());
+        block.extend(own.iter().map(|e| e.p - origin));
+        for p in context {
             block.extend(p);
         }
         if debug.is_some() {
@@ -762,8 +761,9 @@ fn tile_statistics(store: &Store, grid: &Grid, t: u32, first: (TilePoints, Vec<b
 /// what the widest halo holds.
 const STATS_HALO_GROWTH: f64 = 4.0;
 
-/// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells of side `side`, on the rayon pool if `idle`
-/// says that the pool has nothing else to do (the same cloud either way).
+/// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells of side `side`, on
+/// the rayon pool if `idle` says that the pool has nothing else to do (the same cloud either
+/// way).
 #[allow(clippy::too_many_arguments)]
 fn load_cloud(store: &Store, grid: &Grid, t: u32, (halo, side): (f64, f64), keep: f64, seed: u64, kq: f64, idle: bool) -> Result<(Cloud, Vec<bool>)> {
     let (tp, core) = load(store, grid, t, halo, keep, seed, kq)?;

@@ -91,11 +91,9 @@ impl Cloud {
     fn build(world: &[DVec3], gids: &[u64], origin: DVec3, parallel: bool, side: Option<f64>) -> Cloud {
         use rayon::prelude::*;
         let ext = world.iter().fold(0.0f64, |m, p| m.max((*p - origin).max_element()));
-        let mut order: Vec<(u64, u32)> = match side {
-            Some(side) => {
-                let cells = Cells::new(side, ext);
-                world.iter().enumerate().map(|(i, p)| (cells.key(*p - origin), i as u32)).collect()
-            }
+        let mut cells = side.map(|side| Cells::new(side, ext));
+        let mut order: Vec<(u64, u32)> = match &cells {
+            Some(cells) => world.iter().enumerate().map(|(i, p)| (cells.key(*p - origin), i as u32)).collect(),
             None => {
                 let q = if ext > 0.0 { ((1u64 << 21) - 1) as f64 / ext } else { 0.0 };
                 let code = |p: DVec3| {
@@ -110,11 +108,9 @@ impl Cloud {
         } else {
             order.sort_unstable();
         }
-        let cells = side.map(|side| {
-            let mut c = Cells::new(side, ext);
+        if let Some(c) = &mut cells {
             c.index(order.iter().map(|o| o.0));
-            c
-        });
+        }
         let ids: Vec<u32> = order.iter().map(|o| o.1).collect();
         let pos: Vec<DVec3> = ids.iter().map(|&i| world[i as usize] - origin).collect();
         let gid: Vec<u64> = ids.iter().map(|&i| gids[i as usize]).collect();
@@ -602,9 +598,7 @@ impl Coords {
     }
 
     fn fill(&mut self, pos: impl Iterator<Item = DVec3>) {
-        self.x.clear();
-        self.y.clear();
-        self.z.clear();
+        self.clear();
         for p in pos {
             self.x.push(p.x);
             self.y.push(p.y);
