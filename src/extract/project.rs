@@ -74,10 +74,11 @@ pub struct Projected {
 /// test). Quality table, seeds 1 / 2: mean recall of the 0.01 dB rows 0.798 / 0.798 -> 0.804 /
 /// 0.807, precision 0.809 / 0.816 -> 0.832 / 0.842; 0.02 dB rows 0.622 / 0.634 -> 0.662 /
 /// 0.660 and 0.640 / 0.655 -> 0.691 / 0.690; noise-free rows unchanged; holecube at 0.02 dB
-/// reached its target at both seeds, joint at 0.01 dB at seed 2. The projection of a noisy 500 k cloud takes up to twice as
-/// long (the table: 120 -> 139 s). Noise-free clouds hold about 56 points in the ball (81 ln 2
-/// at 9 kappa) and are not affected. (Thinning to 300 instead of 150 gained a little more at
-/// 0.01 dB but tripled the time of the 0.005 dB rows, to 10-14 s.)
+/// reached its target at both seeds, joint at 0.01 dB at seed 2. The projection of a noisy
+/// 500 k cloud takes up to twice as long (the table: 120 -> 139 s). Noise-free clouds hold
+/// about 56 points in the ball (81 ln 2 at 9 kappa) and are not affected. (Thinning to 300
+/// instead of 150 gained a little more at 0.01 dB but tripled the time of the 0.005 dB rows,
+/// to 10-14 s.)
 const MAX_NEIGHBOURS: usize = 700;
 /// Fewest neighbours one robust fit looks at (sparse regions widen the ball).
 const MIN_NEIGHBOURS: usize = 40;
@@ -594,10 +595,10 @@ mod tests {
     fn edge_points_on_a_noisy_hole_rim_stay_on_the_rim() {
         // A plate (z = 0) with a hole of radius 0.25 whose wall goes down, about 600 points in
         // a projection ball (see MAX_NEIGHBOURS), with noise uniform in a ball of radius 0.035
-        // (holecube at 0.02 dB). With only the nearest 192 points,
-        // the wall beside the rim was split in two for 5-7 % of the candidates (seeds 1 and 3),
-        // and the edge points sank 0.45-0.47 noise radii into the hole on average; with the
-        // whole ball, 0-0.4 % and 0.28-0.37.
+        // (holecube at 0.02 dB). With only the nearest 192 points, the wall beside the rim was
+        // split in two for 5-7 % of the candidates (seeds 1 and 3), and the edge points sank
+        // 0.45-0.47 noise radii into the hole on average; with the whole ball, 0-0.4 % and
+        // 0.28-0.37.
         let (hole, noise, radius) = (0.25, 0.035, 0.18);
         for seed in 1..=3 {
             let mut rng = Rng::stream(seed, 0);
