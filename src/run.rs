@@ -465,7 +465,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         // (The per-point steps around the fits run on the pool too: serial, they left one core
         // idle for a moment of every tile.)
         let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| core[cloud.ids[i as usize] as usize]).collect();
-        let res = extract::candidates::residuals(&cloud, &which, r.fit_radius, halo);
+        let res = extract::candidates::residuals(&cloud, &which, r.fit_radius, halo, r.noise_limited());
         // (In the cloud's order, which the projection pass's load of the tile gives again.)
         let mut out = Vec::with_capacity(which.len() * 12);
         for (&i, x) in which.iter().zip(res) {
@@ -498,7 +498,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         let same_order = res.len() == core_pts.len() && res.par_iter().zip(&core_pts).all(|(r, &i)| r.0 == cloud.gid[i as usize]);
         let mut cand: Vec<u32> = Vec::new();
         if same_order {
-            cand.extend(core_pts.iter().zip(&res).filter(|(_, r)| r.1 as f64 > tau).map(|(&i, _)| i));
+            cand.extend(core_pts.iter().zip(&res).filter(|(_, r)| extract::candidates::is_candidate(r.1, tau)).map(|(&i, _)| i));
         } else {
             let mut core_ids: Vec<(u64, u32)> = core_pts.iter().map(|&i| (cloud.gid[i as usize], i)).collect();
             core_ids.par_sort_unstable();
@@ -508,7 +508,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
                 while k < res.len() && res[k].0 < g {
                     k += 1;
                 }
-                if k < res.len() && res[k].0 == g && res[k].1 as f64 > tau {
+                if k < res.len() && res[k].0 == g && extract::candidates::is_candidate(res[k].1, tau) {
                     cand.push(i);
                 }
             }
@@ -573,20 +573,20 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             || load_edges(t),
             || {
                 let near: Vec<u32> = boxes.iter().filter(|&&(u, ulo, uhi)| u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all()).map(|b| b.0).collect();
-                near.par_iter().map(|&u| Ok(load_edges(u)?.0.iter().filter(|e| inside(e.p)).map(|e| e.p - origin).collect::<Vec<_>>())).collect::<Result<Vec<_>>>()
+                near.par_iter().map(|&u| Ok(load_edges(u)?.0.into_iter().filter(|e| inside(e.p)).collect::<Vec<_>>())).collect::<Result<Vec<_>>>()
             },
         );
         let (own, context) = (own?.0, context?);
-        let mut block: Vec<DVec3> = Vec::with_capacity(own.len() + context.iter().map(Vec::len).sum::<usize>());
-        block.extend(own.iter().map(|e| e.p - origin));
-        for p in context {
-            block.extend(p);
+        let size = own.len() + context.iter().map(Vec::len).sum::<usize>();
+        let (mut block, mut block_normals) = (Vec::with_capacity(size), Vec::with_capacity(size));
+        for e in own.iter().chain(context.iter().flatten()) {
+            block.push(e.p - origin);
+            block_normals.push(e.n);
         }
         if debug.is_some() {
             debug_edges.extend_from_slice(&block[..own.len()]);
         }
-        points.extend(extract::smooth_block(&block, own.len(), &grouped, &r));
-        normals.extend(own.iter().map(|e| e.n));
+        counts.unconfirmed += extract::smooth_and_confirm(&block, &block_normals, own.len(), &grouped, &r, &mut points, &mut normals);
         bar.inc(1);
         check_stop()?;
     }

@@ -231,6 +231,17 @@ impl Quadric {
         self.gradient(p).normalize_or_zero()
     }
 
+    /// The direction of strongest curvature, as an angle from the frame's u axis towards v:
+    /// the eigenvector of the height function's Hessian with the larger |eigenvalue|.
+    pub fn strongest_curvature_angle(&self) -> f64 {
+        let a = &self.a;
+        let (huu, huv, hvv) = (2.0 * a[3], a[4], 2.0 * a[5]);
+        let phi = 0.5 * (2.0 * huv).atan2(huu - hvv);
+        let root = ((huu - hvv).powi(2) + 4.0 * huv * huv).sqrt();
+        let (l1, l2) = (0.5 * (huu + hvv + root), 0.5 * (huu + hvv - root));
+        if l1.abs() >= l2.abs() { phi } else { phi + std::f64::consts::FRAC_PI_2 }
+    }
+
     /// Weighted least-squares fit of heights over `frame` to `(point, weight)` pairs. The
     /// curvature terms are damped by `ridge` (relative to the data's spread) so that a
     /// one-sided or sparse neighbourhood falls back smoothly towards a plane.

@@ -8,6 +8,7 @@
 pub mod candidates;
 pub mod cloud;
 pub mod complete;
+pub mod consensus;
 pub mod fit;
 pub mod grow;
 pub mod project;
@@ -101,6 +102,13 @@ impl Resolved {
     pub fn cell_side(&self) -> f64 {
         1.5 * self.fit_radius
     }
+
+    /// True if the neighbourhoods are sized by the noise rather than by the spacing (see
+    /// [`NOISE_SCALE`]): the candidates then also take the crease test (see
+    /// [`candidates::CREASE_RATIO`]).
+    pub fn noise_limited(&self) -> bool {
+        self.scale > self.kappa
+    }
 }
 
 impl Params {
@@ -143,6 +151,10 @@ pub struct Counts {
     pub edge_points: u64,
     /// Corner points before grouping.
     pub corner_points: u64,
+    /// Edge points dropped before growing because no neighbour agreed on their two surfaces
+    /// (see [`consensus`]).
+    #[serde(default)]
+    pub unconfirmed: u64,
     /// Corners after grouping.
     pub corners: u64,
     /// Polylines grown.
@@ -390,6 +402,24 @@ pub fn smooth_block(points: &[DVec3], own: usize, grouped: &[DVec3], r: &Resolve
     out
 }
 
+/// Stage 3 and the consensus filter for a block of the edge cloud (see [`smooth_block`]; the
+/// normals are those of `points`, context included): appends the smoothed positions of the
+/// first `own` points that their neighbours confirm (see [`consensus`]), with their normals, to
+/// `points_out` and `normals_out`, and returns how many were dropped. (The smoothing takes every
+/// edge point as context, confirmed or not, so that the block's context need reach no further.)
+pub fn smooth_and_confirm(points: &[DVec3], normals: &[[glam::Vec3; 2]], own: usize, grouped: &[DVec3], r: &Resolved, points_out: &mut Vec<DVec3>, normals_out: &mut Vec<[glam::Vec3; 2]>) -> u64 {
+    let smoothed = smooth_block(points, own, grouped, r);
+    let keep = consensus::confirmed(points, normals, own, r.step);
+    let before = points_out.len();
+    for ((p, n), k) in smoothed.into_iter().zip(&normals[..own]).zip(keep) {
+        if k {
+            points_out.push(p);
+            normals_out.push(*n);
+        }
+    }
+    (own - (points_out.len() - before)) as u64
+}
+
 /// Stages 4 and 5 on the whole smoothed edge cloud (positions relative to `origin`, with the
 /// normals of each point's two surfaces), in any order: polyline growing and completion.
 pub fn curves_from_smoothed(points: Vec<DVec3>, normals: Vec<[glam::Vec3; 2]>, grouped: &[DVec3], origin: DVec3, r: &Resolved, counts: &mut Counts, seconds: &mut Timings) -> Vec<Polyline> {
@@ -462,10 +492,11 @@ pub fn curves_from_edges(mut edges: Vec<WorldEdge>, corners: Vec<WorldCorner>, r
     if let Ok(dir) = std::env::var("CREASE_DEBUG_DIR") {
         debug_dump(&dir, "edges.obj", &local, origin);
     }
-    let smoothed = smooth_block(&local, local.len(), &grouped, r);
+    let (mut smoothed, mut kept_normals) = (Vec::new(), Vec::new());
+    counts.unconfirmed = smooth_and_confirm(&local, &normals, local.len(), &grouped, r, &mut smoothed, &mut kept_normals);
     drop(local);
     seconds.smoothing = t.elapsed().as_secs_f64();
-    curves_from_smoothed(smoothed, normals, &grouped, origin, r, counts, seconds)
+    curves_from_smoothed(smoothed, kept_normals, &grouped, origin, r, counts, seconds)
 }
 
 /// Extracts feature curves from `points` (world coordinates) held in memory: the whole cloud
@@ -503,9 +534,9 @@ pub fn extract(points: &[DVec3], params: &Params) -> Extraction {
 
     let t = Instant::now();
     let all: Vec<u32> = (0..cloud.len() as u32).collect();
-    let res = candidates::residuals(&cloud, &all, r.fit_radius, r.halo());
+    let res = candidates::residuals(&cloud, &all, r.fit_radius, r.halo(), r.noise_limited());
     let tau = params.tau.unwrap_or_else(|| settle(candidates::ResidualSum::of(res.iter().copied()).mean()));
-    let cand: Vec<u32> = all.iter().copied().filter(|&i| res[i as usize] as f64 > tau).collect();
+    let cand: Vec<u32> = all.iter().copied().filter(|&i| candidates::is_candidate(res[i as usize], tau)).collect();
     counts.candidates = cand.len() as u64;
     seconds.candidates = t.elapsed().as_secs_f64();
 

@@ -321,13 +321,7 @@ fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f
 /// planes are split across the quadric's direction of strongest curvature, at the best of
 /// seven positions (from 20% to 80% of the points). Returns the points of the larger side.
 fn crease_split(pts: &[DVec3], members: &[usize], q: &Quadric, rss: f64) -> Option<Vec<usize>> {
-    let a = &q.a;
-    let (huu, huv, hvv) = (2.0 * a[3], a[4], 2.0 * a[5]);
-    // The Hessian's eigenvector of larger |eigenvalue|, as an angle in the frame's (u, v).
-    let phi = 0.5 * (2.0 * huv).atan2(huu - hvv);
-    let root = ((huu - hvv).powi(2) + 4.0 * huv * huv).sqrt();
-    let (l1, l2) = (0.5 * (huu + hvv + root), 0.5 * (huu + hvv - root));
-    let phi = if l1.abs() >= l2.abs() { phi } else { phi + std::f64::consts::FRAC_PI_2 };
+    let phi = q.strongest_curvature_angle();
     let (c, s) = (phi.cos(), phi.sin());
     let mut by: Vec<(f64, usize)> = members
         .iter()
