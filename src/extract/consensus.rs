@@ -1,4 +1,5 @@
-//! Between stages 3 and 4: edge points that no neighbour confirms are dropped before growing.
+//! Between stages 3 and 4, on noise-limited clouds: edge points that no neighbour confirms are
+//! dropped before growing.
 //!
 //! A crease gives every candidate near it the same two surfaces, so its edge points agree with
 //! their neighbours on both normals. Edge points found where no crease is (a curved wall fitted
