@@ -22,7 +22,8 @@ use rayon::prelude::*;
 pub const AGREE_DEG: f64 = 20.0;
 /// An edge point is kept if at least this many of its neighbours within one step agree with
 /// it... (Along fandisk's ridge feet at 0.01 dB, nine of ten edge points have 3 or more; of the
-/// edge points off the truth in joint's bore, half have none and nine of ten 5 or fewer. With
+/// sparse edge points off the truth in joint's bore, half have 2 or fewer and nine of ten 5 or
+/// fewer. With
 /// 2, pairs of them that agreed by chance still made curves there: joint 0.01 dB mean distance
 /// 0.0050 dB; with 3 or 4, 0.0022-0.0023, and 4 kept it so with the crease test's extra
 /// candidates.)
