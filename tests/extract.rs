@@ -83,21 +83,32 @@ fn sampled_mesh() {
 /// whatever their curve's length). Skipped without `../shared/data/meshes`.
 #[test]
 fn noisy_sampled_mesh() {
-    let Some(off) = common::shared_data("meshes/anchor.off") else { return };
+    let Some((curves, s)) = cli_mesh_scores("anchor", &["-n", "200000", "--noise", "0.005", "--seed", "2"]) else { return };
+    eprintln!("anchor 0.005 dB: {} curves, {s:?}", curves.len());
+    assert!(s.recall >= 0.96, "recall {}", s.recall);
+    assert!(s.precision.unwrap() >= 0.95, "precision {:?}", s.precision);
+}
+
+/// `../shared/data/meshes/<name>.off` sampled with `crease synth mesh` (options `synth`) and
+/// extracted with `crease extract`, as a user would: the curves and their scores, or None
+/// (the test is skipped) without the shared data.
+fn cli_mesh_scores(name: &str, synth: &[&str]) -> Option<(Vec<Polyline>, Scores)> {
+    let off = common::shared_data(&format!("meshes/{name}.off"))?;
     let d = tempfile::tempdir().unwrap();
-    let (las, out) = (d.path().join("anchor.las"), d.path().join("out"));
+    let (las, out) = (d.path().join(format!("{name}.las")), d.path().join("out"));
     let crease = |args: &[&str]| {
         let st = std::process::Command::new(env!("CARGO_BIN_EXE_crease")).args(args).status().unwrap();
         assert!(st.success(), "crease {args:?}");
     };
-    crease(&["synth", "mesh", off.to_str().unwrap(), "-n", "200000", "--noise", "0.005", "--seed", "2", "-o", las.to_str().unwrap()]);
+    let mut args = vec!["synth", "mesh", off.to_str().unwrap()];
+    args.extend_from_slice(synth);
+    args.extend(["-o", las.to_str().unwrap()]);
+    crease(&args);
     crease(&["extract", las.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
-    let truth = read_obj(&d.path().join("anchor.truth.obj")).unwrap();
+    let truth = read_obj(&d.path().join(format!("{name}.truth.obj"))).unwrap();
     let curves = read_obj(&out.join("curves.obj")).unwrap();
     let s = evaluate(&truth, &curves, &EvalOptions::default());
-    eprintln!("anchor 0.005 dB: {} curves, {s:?}", curves.len());
-    assert!(s.recall >= 0.96, "recall {}", s.recall);
-    assert!(s.precision.unwrap() >= 0.95, "precision {:?}", s.precision);
+    Some((curves, s))
 }
 
 #[test]
@@ -145,18 +156,7 @@ fn fandisk_at_one_percent_noise() {
 /// `../shared/data/meshes`.
 #[test]
 fn joint_bore_under_noise() {
-    let Some(off) = common::shared_data("meshes/joint.off") else { return };
-    let d = tempfile::tempdir().unwrap();
-    let (las, out) = (d.path().join("joint.las"), d.path().join("out"));
-    let crease = |args: &[&str]| {
-        let st = std::process::Command::new(env!("CARGO_BIN_EXE_crease")).args(args).status().unwrap();
-        assert!(st.success(), "crease {args:?}");
-    };
-    crease(&["synth", "mesh", off.to_str().unwrap(), "-n", "500000", "--noise", "0.01", "-o", las.to_str().unwrap()]);
-    crease(&["extract", las.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
-    let truth = read_obj(&d.path().join("joint.truth.obj")).unwrap();
-    let curves = read_obj(&out.join("curves.obj")).unwrap();
-    let s = evaluate(&truth, &curves, &EvalOptions::default());
+    let Some((curves, s)) = cli_mesh_scores("joint", &["-n", "500000", "--noise", "0.01"]) else { return };
     eprintln!("joint 0.01 dB: {} curves, {s:?}", curves.len());
     assert_scores("joint 0.01 dB", &s, 0.95, 0.95, 0.003);
 }

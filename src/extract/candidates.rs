@@ -71,13 +71,20 @@ fn residual_of(cloud: &Cloud, i: usize, r: f64, buf: &[(u32, f32)], pts: &mut Ve
 fn crease_across(pts: &[(DVec3, f64)], x: DVec3, q: &Quadric) -> bool {
     let phi = q.strongest_curvature_angle();
     let across = q.frame.u * phi.cos() + q.frame.v * phi.sin();
-    let side = |below: bool| pts.iter().copied().filter(move |&(p, _)| ((p - x).dot(across) < 0.0) == below);
-    if side(true).count() < 8 || side(false).count() < 8 {
+    let below = |p: DVec3| (p - x).dot(across) < 0.0;
+    // (Each side's count and weight in one pass, summed in the points' order.)
+    let (mut count, mut weight) = ([0usize; 2], [0.0f64; 2]);
+    for &(p, w) in pts {
+        let k = below(p) as usize;
+        count[k] += 1;
+        weight[k] += w;
+    }
+    if count[0] < 8 || count[1] < 8 {
         return false;
     }
+    let side = |b: bool| pts.iter().copied().filter(move |&(p, _)| below(p) == b);
     let (Some(pa), Some(pb)) = (Pca::of_near(side(true), x), Pca::of_near(side(false), x)) else { return false };
-    let weight = |below: bool| side(below).map(|(_, w)| w).sum::<f64>();
-    let planes = pa.values[2] * weight(true) + pb.values[2] * weight(false);
+    let planes = pa.values[2] * weight[1] + pb.values[2] * weight[0];
     let quadric: f64 = pts.iter().map(|&(p, w)| w * q.value(p).powi(2)).sum();
     planes < CREASE_RATIO * quadric && pa.normal().dot(pb.normal()).abs() < CREASE_MIN_DEG.to_radians().cos()
 }
