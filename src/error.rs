@@ -1,12 +1,18 @@
 //! Errors crease reports to its users.
 //!
 //! Every error that comes from bad input names the file and the problem in one line, so the
-//! CLI can print it and exit with code 2 (see [`Error::exit_code`]).
+//! CLI can print it and exit with code 2 (see [`Error::exit_code`]). Where a lower layer gave a
+//! cause (an I/O or a decompression error), it is kept as the error's [`source`].
+//!
+//! [`source`]: std::error::Error::source
 
 use std::path::{Path, PathBuf};
 
 /// The crate-wide result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A lower layer's error, kept as the cause.
+pub type Cause = Box<dyn std::error::Error + Send + Sync>;
 
 /// What went wrong.
 #[derive(Debug, thiserror::Error)]
@@ -18,6 +24,21 @@ pub enum Error {
         path: PathBuf,
         /// What is wrong with it, in one line.
         msg: String,
+        /// The lower layer's error, if any.
+        #[source]
+        source: Option<Cause>,
+    },
+    /// A file of a run directory is damaged (wrong format, failed checksum, truncated): the
+    /// run cannot continue from it.
+    #[error("{}: damaged run directory file ({what}); run again with --force to start over", path.display())]
+    Damaged {
+        /// The damaged file.
+        path: PathBuf,
+        /// What is wrong with it.
+        what: String,
+        /// The lower layer's error, if any.
+        #[source]
+        source: Option<Cause>,
     },
     /// The user asked for something that cannot be done (bad argument combination, bad value).
     #[error("{0}")]
@@ -33,12 +54,25 @@ pub enum Error {
         /// The underlying I/O error.
         source: std::io::Error,
     },
+    /// A worker thread panicked: a bug in crease, not a problem with the input.
+    #[error("internal error: the {0} thread panicked ({1}); please report this")]
+    Panic(String, String),
 }
 
 impl Error {
     /// An input error about `path`.
     pub fn input(path: impl AsRef<Path>, msg: impl Into<String>) -> Self {
-        Error::Input { path: path.as_ref().to_path_buf(), msg: msg.into() }
+        Error::Input { path: path.as_ref().to_path_buf(), msg: msg.into(), source: None }
+    }
+
+    /// An input error about `path` with its cause.
+    pub fn input_from(path: impl AsRef<Path>, msg: impl Into<String>, source: impl Into<Cause>) -> Self {
+        Error::Input { path: path.as_ref().to_path_buf(), msg: msg.into(), source: Some(source.into()) }
+    }
+
+    /// A damaged run directory file.
+    pub fn damaged(path: impl AsRef<Path>, what: impl Into<String>) -> Self {
+        Error::Damaged { path: path.as_ref().to_path_buf(), what: what.into(), source: None }
     }
 
     /// An output error about `path`.
@@ -46,17 +80,30 @@ impl Error {
         Error::Output { path: path.as_ref().to_path_buf(), source }
     }
 
-    /// Exit code for the CLI: 2 for bad input or usage, 1 for failures while writing.
+    /// The error for a thread `name` that panicked with `payload`.
+    pub fn panic(name: &str, payload: Box<dyn std::any::Any + Send>) -> Self {
+        let what = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "no message".to_string());
+        Error::Panic(name.to_string(), what)
+    }
+
+    /// Exit code for the CLI: 2 for bad input or usage, 1 for failures while writing, 130 when
+    /// interrupted, 70 for an internal error.
     pub fn exit_code(&self) -> i32 {
         match self {
-            Error::Input { .. } | Error::Usage(_) => 2,
+            Error::Input { .. } | Error::Damaged { .. } | Error::Usage(_) => 2,
             Error::Output { .. } => 1,
             Error::Interrupted => 130,
+            Error::Panic(..) => 70,
         }
     }
 }
 
-/// Turns an I/O error while reading `path` into an input error with a readable message.
+/// Turns an I/O error while reading `path` into an input error with a readable message,
+/// keeping the I/O error as its cause.
 pub fn io_input(path: &Path, e: std::io::Error) -> Error {
     let msg = match e.kind() {
         std::io::ErrorKind::NotFound => "no such file or directory".to_string(),
@@ -64,5 +111,5 @@ pub fn io_input(path: &Path, e: std::io::Error) -> Error {
         std::io::ErrorKind::UnexpectedEof => "file is truncated".to_string(),
         _ => e.to_string(),
     };
-    Error::input(path, msg)
+    Error::input_from(path, msg, e)
 }

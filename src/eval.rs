@@ -9,7 +9,7 @@
 //! - Chamfer distance: the average of the two directed mean distances; Hausdorff: the larger of
 //!   the two directed maximum distances. All distances are reported in dB units.
 
-use crate::cloud::Bounds;
+use crate::points::Bounds;
 use crate::curves::Polyline;
 use crate::spatial::Index;
 use glam::DVec3;

@@ -1,6 +1,6 @@
 //! `crease info`: what each input file holds, from its header plus a small sample of points.
 
-use crate::cloud::{Bounds, CloudHeader, FileFormat, PointChunk};
+use crate::points::{Bounds, CloudHeader, FileFormat, PointChunk};
 use crate::error::Result;
 use crate::io::{Filter, PointReader};
 use glam::DVec3;

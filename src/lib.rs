@@ -2,21 +2,48 @@
 //!
 //! The crate is a library first; the `crease` binary only parses arguments and calls it.
 //! See `README.md` for use and `../shared/DESIGN.md` for the method and architecture.
+//!
+//! Modules, in the order data flows through a run (each imports only modules listed above it,
+//! or the leaves at the end):
+//! - [`io`]: reads LAS/LAZ/PLY headers and streams their points in chunks ([`points`] types);
+//! - [`info`]: `crease info`, a file's header, CRS and spacing estimate;
+//! - [`tiles`]: the tile grid, the tile store (tiles written once, halos assembled on read),
+//!   the bucketer;
+//! - [`extract`]: the method, stage by stage, as functions of plain data (statistics,
+//!   candidates, projection, smoothing, growing, completion);
+//! - [`run`]: the pipeline (plan, bucket, statistics, residuals, projection, curves, write) over
+//!   a run directory or memory, resumable, with `crease status`;
+//! - [`curves`]: the output polylines and their OBJ, PLY and GeoJSON writers and readers;
+//! - [`eval`]: scores curves against ground truth;
+//! - [`synth`]: test clouds with known curves (shapes, meshes, a large scene).
+//!
+//! Leaves (import nothing of the crate but [`error`]): [`points`] (plain cloud data types),
+//! [`keys`] (position keys, hashing, snapping), [`rng`] (the keyed random stream), [`grid`]
+//! (cells of a uniform grid), [`spatial`] (the k-d tree), [`spacing`], [`codec`] (the record
+//! format of a run directory), [`workspace`] (run directory or memory), [`cancel`], [`debug`],
+//! [`progress`], [`mem`], [`error`].
 #![warn(missing_docs)]
 
-pub mod cloud;
+pub mod cancel;
+pub mod codec;
 pub mod curves;
+pub mod debug;
 pub mod error;
 pub mod eval;
 pub mod extract;
+pub mod grid;
 pub mod info;
 pub mod io;
+pub mod keys;
 pub mod mem;
+pub mod points;
 pub mod progress;
+pub mod rng;
 pub mod run;
 pub mod spacing;
 pub mod spatial;
 pub mod synth;
 pub mod tiles;
+pub mod workspace;
 
 pub use error::{Error, Result};

@@ -134,6 +134,11 @@ enum Cmd {
         /// Print nothing but errors.
         #[arg(long, short)]
         quiet: bool,
+        /// Write the intermediate point sets (candidates per tile, edge cloud, smoothed edge
+        /// cloud, corners, grown polylines) to this directory as OBJ files (also taken from
+        /// the environment variable CREASE_DEBUG_DIR).
+        #[arg(long)]
+        debug_dir: Option<PathBuf>,
     },
     /// Tells what a run directory has done and what is left.
     Status {
@@ -324,7 +329,7 @@ fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Cmd::Synth { what } => synth_cmd(what)?,
-        Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet } => {
+        Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir } => {
             if let Some(n) = threads {
                 rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
             }
@@ -333,12 +338,19 @@ fn run(cli: Cli) -> Result<(), Error> {
                     return Err(Error::Usage("--tile-size must be a positive number".into()));
                 }
             }
-            let _ = ctrlc::set_handler(|| crease::run::STOP.store(true, std::sync::atomic::Ordering::SeqCst));
+            let cancel = crease::cancel::Cancel::default();
+            let _ = ctrlc::set_handler({
+                let cancel = cancel.clone();
+                move || cancel.set()
+            });
+            let defaults = crease::run::RunOptions::default();
             let opts = crease::run::RunOptions {
-                memory: memory.unwrap_or_else(|| (crease::mem::total_memory() / 2).max(256 << 20)),
+                memory: memory.unwrap_or(defaults.memory),
                 tile_size,
                 force,
                 progress: if quiet { crease::progress::Mode::Quiet } else { crease::progress::Mode::Auto },
+                cancel,
+                debug: crease::debug::DebugDump::new(debug_dir.or_else(|| std::env::var_os("CREASE_DEBUG_DIR").map(PathBuf::from))),
             };
             let params = params.params()?;
             let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {

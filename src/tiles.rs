@@ -5,12 +5,18 @@
 //! processed, from the neighbouring tiles' stores, so the halo width can be chosen after the
 //! cloud's spacing and noise are known.
 
-use crate::cloud::{Bounds, PointChunk};
+pub use crate::points::TilePoints;
+use crate::points::{Bounds, PointChunk};
 use crate::error::{Error, Result};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
-use std::io::{Read, Write};
-use std::path::{Path, PathBuf};
+use crate::codec;
+use crate::workspace::Workspace;
+use std::path::Path;
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |e| Error::output(path, e)
+}
 
 /// A regular grid of cubic (3D) or square-column (2D, one layer in z) tiles.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -99,63 +105,61 @@ pub fn within(b: &Bounds, halo: f64, p: DVec3) -> bool {
     (0..3).all(|a| p[a] >= b.min[a] - halo && p[a] < b.max[a] + halo)
 }
 
-/// Points of a tile: world positions and global ids.
-#[derive(Clone, Debug, Default)]
-pub struct TilePoints {
-    /// Positions.
-    pub xyz: Vec<DVec3>,
-    /// Global ids.
-    pub gid: Vec<u64>,
+
+/// The tile store: each tile's points, as frames of the record codec (see [`crate::codec`])
+/// appended to `tiles/<tile>.pts` in the run's workspace. A frame's metadata is its point count
+/// and bounding box, so readers skip frames outside a region without decompressing them.
+#[derive(Clone, Copy)]
+pub struct Store<'a> {
+    ws: &'a Workspace,
 }
 
-/// The directory of tile stores.
-#[derive(Clone, Debug)]
-pub struct Store {
-    dir: PathBuf,
-}
+/// The codec kind of tile point frames.
+const KIND: [u8; 4] = *b"TPTS";
+/// Bytes of a frame's metadata: point count and bounding box.
+const META: usize = 4 + 48;
+/// The store's directory in the workspace.
+pub const DIR: &str = "tiles";
 
-fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
-    move |e| Error::output(path, e)
-}
-
-impl Store {
-    /// A store in `dir` (created if needed).
-    pub fn new(dir: &Path) -> Result<Store> {
-        std::fs::create_dir_all(dir).map_err(io(dir))?;
-        Ok(Store { dir: dir.to_path_buf() })
+impl<'a> Store<'a> {
+    /// The store of workspace `ws` (its directory created if needed).
+    pub fn new(ws: &'a Workspace) -> Result<Store<'a>> {
+        ws.create_dir(DIR)?;
+        Ok(Store { ws })
     }
 
-    fn path(&self, t: u32) -> PathBuf {
-        self.dir.join(format!("{t}.pts"))
+    fn name(t: u32) -> String {
+        format!("{DIR}/{t}.pts")
     }
 
-    /// Appends points to tile `t`'s file as one compressed chunk, headed by its point count,
-    /// compressed length and bounding box (so readers can skip chunks outside a region).
+    /// Removes every tile's points.
+    pub fn clear(&self) -> Result<()> {
+        self.ws.remove(DIR);
+        self.ws.create_dir(DIR)
+    }
+
+    /// Appends points to tile `t`'s file as one frame.
     pub fn append(&self, t: u32, pts: &TilePoints) -> Result<()> {
         self.append_runs(t, pts, &[pts.xyz.len()])
     }
 
-    /// Appends `pts` to tile `t`'s file as several chunks, of the lengths in `runs` (see
-    /// [`Store::append`]).
+    /// Appends `pts` to tile `t`'s file as several frames, of the lengths in `runs`.
     pub fn append_runs(&self, t: u32, pts: &TilePoints, runs: &[usize]) -> Result<()> {
-        let path = self.path(t);
-        let f = std::fs::OpenOptions::new().create(true).append(true).open(&path).map_err(io(&path))?;
-        let mut f = std::io::BufWriter::new(f);
+        let name = Self::name(t);
+        let path = self.ws.path(&name);
         let mut zc = zstd::bulk::Compressor::new(1).map_err(io(&path))?;
+        let mut out = Vec::new();
         let mut at = 0;
         for &n in runs {
-            write_chunk(&mut zc, &mut f, &path, &pts.xyz[at..at + n], &pts.gid[at..at + n])?;
+            out.extend(encode_chunk(&mut zc, &pts.xyz[at..at + n], &pts.gid[at..at + n]).map_err(io(&path))?);
             at += n;
         }
-        f.flush().map_err(io(&path))
+        self.ws.append(&name, &out)
     }
 
     /// Makes every tile file durable.
     pub fn sync(&self) -> Result<()> {
-        for e in std::fs::read_dir(&self.dir).map_err(io(&self.dir))?.flatten() {
-            std::fs::File::open(e.path()).and_then(|f| f.sync_all()).map_err(io(&e.path()))?;
-        }
-        Ok(())
+        self.ws.sync_dir(DIR)
     }
 
     /// Streams tile `t`'s points in chunks, keeping those `keep` accepts.
@@ -166,39 +170,38 @@ impl Store {
     /// As [`Store::read`], but only chunks whose bounding box comes within the given distance
     /// of the given box are decompressed (a tile's halo needs only its neighbours' borders).
     pub fn read_near(&self, t: u32, near: Option<(&Bounds, f64)>, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<()> {
-        let path = self.path(t);
-        let f = match std::fs::File::open(&path) {
-            Ok(f) => f,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-            Err(e) => return Err(Error::input(&path, e.to_string())),
-        };
-        let corrupt = || Error::input(&path, "corrupt tile store (remove the run directory or use --force)");
-        let mut head = [0u8; CHUNK_HEADER];
-        let mut z = Vec::new();
-        let mut f = std::io::BufReader::new(f);
-        let mut zd = zstd::bulk::Decompressor::new().map_err(|e| Error::input(&path, e.to_string()))?;
-        loop {
-            match f.read_exact(&mut head) {
-                Ok(()) => {}
-                Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,
-                Err(e) => return Err(Error::input(&path, e.to_string())),
+        let name = Self::name(t);
+        let path = self.ws.path(&name);
+        let Some(mut f) = self.ws.open(&name)? else { return Ok(()) };
+        let truncated = |_| Error::damaged(&path, "truncated tile store");
+        let mut head = [0u8; codec::HEADER];
+        let (mut meta, mut z) = (Vec::new(), Vec::new());
+        while f.read_exact_or_end(&mut head).map_err(|e| Error::input_from(&path, "unreadable", e))? {
+            let h = codec::FrameHeader::parse(&head, KIND, &path)?;
+            if h.meta_len != META {
+                return Err(Error::damaged(&path, "tile frame metadata of the wrong size"));
             }
-            let n = u32::from_le_bytes(head[..4].try_into().unwrap()) as usize;
-            let zl = u32::from_le_bytes(head[4..8].try_into().unwrap()) as usize;
-            let v = |k: usize| f64::from_le_bytes(head[8 + 8 * k..16 + 8 * k].try_into().unwrap());
-            let chunk = Bounds { min: [v(0), v(1), v(2)], max: [v(3), v(4), v(5)] };
+            meta.resize(META, 0);
+            f.read_exact(&mut meta).map_err(truncated)?;
+            let mut m = codec::Reader::new(&meta, &path);
+            let n = m.u32()? as usize;
+            let mut v = [0.0; 6];
+            for x in v.iter_mut() {
+                *x = m.f64()?;
+            }
+            let chunk = Bounds { min: [v[0], v[1], v[2]], max: [v[3], v[4], v[5]] };
             if let Some((b, d)) = near {
                 if (0..3).any(|a| chunk.min[a] > b.max[a] + d || chunk.max[a] < b.min[a] - d) {
-                    f.seek_relative(zl as i64).map_err(|_| corrupt())?;
+                    f.skip(h.zstd_len).map_err(truncated)?;
                     continue;
                 }
             }
-            z.resize(zl, 0);
-            f.read_exact(&mut z).map_err(|_| corrupt())?;
-            let raw = zd.decompress(&z, n * 32).map_err(|_| corrupt())?;
-            if raw.len() != n * 32 {
-                return Err(corrupt());
+            z.resize(h.zstd_len, 0);
+            f.read_exact(&mut z).map_err(truncated)?;
+            if h.raw_len != n * 32 {
+                return Err(Error::damaged(&path, "tile frame of the wrong length"));
             }
+            let raw = h.open(&meta, &z, &path)?;
             let f64_at = |o: usize| f64::from_le_bytes(raw[o..o + 8].try_into().unwrap());
             for i in 0..n {
                 let p = DVec3::new(f64_at(8 * i), f64_at(8 * (n + i)), f64_at(8 * (2 * n + i)));
@@ -213,7 +216,8 @@ impl Store {
     }
 }
 
-fn write_chunk(zc: &mut zstd::bulk::Compressor, f: &mut impl Write, path: &Path, xyz: &[DVec3], gid: &[u64]) -> Result<()> {
+/// One frame of points: coordinates column by column, then global ids.
+fn encode_chunk(zc: &mut zstd::bulk::Compressor, xyz: &[DVec3], gid: &[u64]) -> std::io::Result<Vec<u8>> {
     let n = xyz.len();
     let bounds = Bounds::of(xyz.iter().copied());
     let mut raw = Vec::with_capacity(n * 32);
@@ -225,18 +229,14 @@ fn write_chunk(zc: &mut zstd::bulk::Compressor, f: &mut impl Write, path: &Path,
     for g in gid {
         raw.extend_from_slice(&g.to_le_bytes());
     }
-    let z = zc.compress(&raw).map_err(io(path))?;
-    f.write_all(&(n as u32).to_le_bytes()).map_err(io(path))?;
-    f.write_all(&(z.len() as u32).to_le_bytes()).map_err(io(path))?;
+    let mut meta = codec::Writer::with_capacity(META);
+    meta.u32(n as u32);
     for v in bounds.min.iter().chain(&bounds.max) {
-        f.write_all(&v.to_le_bytes()).map_err(io(path))?;
+        meta.f64(*v);
     }
-    f.write_all(&z).map_err(io(path))?;
-    Ok(())
+    codec::frame(KIND, &meta.0, &raw, zc)
 }
 
-/// Bytes before each compressed chunk: point count, compressed length, bounding box.
-const CHUNK_HEADER: usize = 8 + 48;
 /// Buffered points of a tile are written in chunks by sub-cell, this many per tile edge, so
 /// that a neighbour's halo reads only the chunks along the border.
 const SUB_CELLS: f64 = 16.0;
@@ -244,7 +244,7 @@ const SUB_CELLS: f64 = 16.0;
 /// Buffers points per tile and appends them to the store when the buffers grow past a budget.
 pub struct Bucketer<'a> {
     grid: &'a Grid,
-    store: &'a Store,
+    store: Store<'a>,
     /// One buffer per tile (a vector, not a map: it is looked up for every point read).
     buffers: Vec<TilePoints>,
     buffered: usize,
@@ -255,7 +255,7 @@ pub struct Bucketer<'a> {
 
 impl<'a> Bucketer<'a> {
     /// A bucketer holding at most `budget` points in memory.
-    pub fn new(grid: &'a Grid, store: &'a Store, budget: usize) -> Self {
+    pub fn new(grid: &'a Grid, store: Store<'a>, budget: usize) -> Self {
         Bucketer { grid, store, buffers: vec![TilePoints::default(); grid.len()], buffered: 0, budget: budget.max(1024), counts: vec![0; grid.len()] }
     }
 
@@ -283,7 +283,7 @@ impl<'a> Bucketer<'a> {
         let o = DVec3::from(self.grid.origin);
         // Tiles are separate files: they are sorted, compressed and written in parallel.
         tiles.into_par_iter().try_for_each(|(t, b)| {
-            let mut order: Vec<([i64; 3], u32)> = b.xyz.iter().enumerate().map(|(i, &p)| (((p - o) / sub).floor().as_i64vec3().to_array(), i as u32)).collect();
+            let mut order: Vec<([i64; 3], u32)> = b.xyz.iter().enumerate().map(|(i, &p)| (crate::grid::cell(p - o, sub).to_array(), i as u32)).collect();
             order.sort_unstable();
             let sorted = TilePoints { xyz: order.iter().map(|r| b.xyz[r.1 as usize]).collect(), gid: order.iter().map(|r| b.gid[r.1 as usize]).collect() };
             drop(b);

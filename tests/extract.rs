@@ -5,7 +5,13 @@ mod common;
 
 use crease::curves::{read_obj, Polyline};
 use crease::eval::{evaluate, EvalOptions, Scores};
-use crease::extract::{extract, Params};
+use crease::extract::Params;
+use crease::run::{extract_cloud, Extraction, RunOptions};
+
+/// The in-memory pipeline, with default options.
+fn extract(points: &[glam::DVec3], params: &Params) -> Extraction {
+    extract_cloud(points, params, &RunOptions::default()).expect("extraction")
+}
 use crease::io::{Filter, PointReader};
 use crease::synth::{self, shapes::shape, Sampling, SynthOptions};
 use glam::DVec3;
@@ -145,7 +151,7 @@ fn fandisk_at_one_percent_noise() {
     let (curves, one) = (run(2), run(1));
     assert_eq!(curves, one, "1 and 2 threads differ");
     let truth = synth::truth_polylines(&sh.truth);
-    let s = evaluate(&truth, &curves, &EvalOptions { diag: Some(crease::cloud::Bounds::of(pts.iter().copied()).diagonal()), ..Default::default() });
+    let s = evaluate(&truth, &curves, &EvalOptions { diag: Some(crease::points::Bounds::of(pts.iter().copied()).diagonal()), ..Default::default() });
     eprintln!("fandisk 0.01 dB: {} curves, {s:?}", curves.len());
     assert_scores("fandisk 0.01 dB", &s, 0.95, 0.93, 0.003);
 }
@@ -166,7 +172,7 @@ fn synth_scores(name: &str, angle: f64, opts: &SynthOptions) -> (Vec<Polyline>, 
     let pts = synth::sample(&sh, opts);
     let truth = synth::truth_polylines(&sh.truth);
     let ex = extract(&pts, &Params::default());
-    let s = evaluate(&truth, &ex.curves, &EvalOptions { diag: Some(crease::cloud::Bounds::of(pts.iter().copied()).diagonal()), ..Default::default() });
+    let s = evaluate(&truth, &ex.curves, &EvalOptions { diag: Some(crease::points::Bounds::of(pts.iter().copied()).diagonal()), ..Default::default() });
     (ex.curves, s)
 }
 

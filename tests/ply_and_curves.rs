@@ -1,6 +1,6 @@
 //! PLY point input in every encoding, and curve output round trips.
 
-use crease::cloud::PointChunk;
+use crease::points::PointChunk;
 use crease::curves::{read_obj, read_ply, write_geojson, write_obj, write_ply, Polyline, Vertex};
 use crease::io::{Filter, PointReader};
 use glam::{DVec3, Vec3};
@@ -137,7 +137,7 @@ fn obj_curves_round_trip_positions_ids_and_shared_corners() {
 fn geojson_carries_crs_and_coordinates() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path().join("c.geojson");
-    let crs = crease::cloud::Crs { wkt: Some("PROJCS[\"x\"]".into()), epsg: Some(2154) };
+    let crs = crease::points::Crs { wkt: Some("PROJCS[\"x\"]".into()), epsg: Some(2154) };
     write_geojson(&p, &sample_curves(), &crs).unwrap();
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     assert_eq!(v["crs"]["properties"]["name"], "urn:ogc:def:crs:EPSG::2154");

@@ -15,7 +15,7 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn opts(tile: Option<f64>) -> RunOptions {
-    RunOptions { memory: 1 << 30, tile_size: tile, force: true, progress: crease::progress::Mode::Quiet }
+    RunOptions { memory: 1 << 30, tile_size: tile, force: true, ..Default::default() }
 }
 
 /// Largest distance from a vertex of `a` to the polylines of `b`.
@@ -188,7 +188,7 @@ fn directory_catalog_matches_single_file() {
     let cat = d.path().join("cat");
     std::fs::create_dir_all(&cat).unwrap();
     // A 3 x 3 grid of files over x and z.
-    let b = crease::cloud::Bounds::of(pts.xyz.iter().copied());
+    let b = crease::points::Bounds::of(pts.xyz.iter().copied());
     let cell = |v: f64, lo: f64, hi: f64| (((v - lo) / (hi - lo) * 3.0) as usize).min(2);
     let mut parts: Vec<Vec<DVec3>> = vec![vec![]; 9];
     for p in &pts.xyz {

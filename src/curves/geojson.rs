@@ -4,7 +4,7 @@
 //! the full WKT in a `crs_wkt` member when the input carries one.
 
 use super::Polyline;
-use crate::cloud::Crs;
+use crate::points::Crs;
 use crate::error::{Error, Result};
 use serde_json::{json, Value};
 use std::io::{BufWriter, Write};

@@ -5,7 +5,8 @@
 //! quadratic along the plane normal. Points with residual above tau are candidates; under noise,
 //! so are points where two planes fit clearly better than the quadratic (a gentle crease).
 
-use super::cloud::{Cloud, Neighbourhood};
+use super::neighbourhood::{Cloud, Neighbourhood};
+use super::params::Resolved;
 use super::fit::{Frame, Pca, Quadric};
 use glam::DVec3;
 
@@ -27,26 +28,84 @@ pub const CREASE_RATIO: f64 = 0.85;
 /// two-plane test).
 pub const CREASE_MIN_DEG: f64 = 20.0;
 
+/// A point's fit residual, and whether it passed the crease test (see [`crease_across`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Residual {
+    /// Largest distance of a neighbour from the fitted quadric.
+    pub value: f32,
+    /// True if two planes explain the neighbourhood clearly better than the quadric.
+    pub crease: bool,
+}
+
+impl Residual {
+    /// Whether the point is a candidate at threshold `tau`: its residual exceeds tau, or it
+    /// passed the crease test.
+    pub fn is_candidate(&self, tau: f64) -> bool {
+        self.crease || self.value as f64 > tau
+    }
+}
+
+/// The residuals of a tile's core points, by global id, in the order of the tile's cloud.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TileResiduals {
+    /// Global ids.
+    pub gid: Vec<u64>,
+    /// Their residuals.
+    pub residual: Vec<Residual>,
+}
+
+/// Stage 1 for one tile: the residual of every core point of `cloud` (`is_core` flags the
+/// points in the order the tile was loaded), with the parameters `r`.
+pub fn tile_residuals(cloud: &Cloud, is_core: &[bool], r: &Resolved) -> TileResiduals {
+    use rayon::prelude::*;
+    // (The per-point steps around the fits run on the pool too: serial, they left one core
+    // idle for a moment of every tile.)
+    let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| is_core[cloud.ids[i as usize] as usize]).collect();
+    let residual = residuals(cloud, &which, r.fit_radius, r.halo(), r.noise_limited());
+    TileResiduals { gid: which.iter().map(|&i| cloud.gid[i as usize]).collect(), residual }
+}
+
+/// The candidates among a tile's core points (indices into `cloud`, in order), given their
+/// residuals as [`tile_residuals`] gave them and the threshold `tau`.
+pub fn tile_candidates(cloud: &Cloud, is_core: &[bool], res: &TileResiduals, tau: f64) -> Vec<u32> {
+    use rayon::prelude::*;
+    // The core points' residuals, in the cloud's order as the residual pass wrote them (the
+    // tile loads the same way in both passes); joined by global id if not.
+    let core: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| is_core[cloud.ids[i as usize] as usize]).collect();
+    let same_order = res.gid.len() == core.len() && res.gid.par_iter().zip(&core).all(|(&g, &i)| g == cloud.gid[i as usize]);
+    if same_order {
+        return core.iter().zip(&res.residual).filter(|(_, r)| r.is_candidate(tau)).map(|(&i, _)| i).collect();
+    }
+    let mut core_ids: Vec<(u64, u32)> = core.iter().map(|&i| (cloud.gid[i as usize], i)).collect();
+    core_ids.par_sort_unstable();
+    let mut by_gid: Vec<(u64, Residual)> = res.gid.iter().copied().zip(res.residual.iter().copied()).collect();
+    by_gid.par_sort_unstable_by_key(|r| r.0);
+    let mut cand = Vec::new();
+    let mut k = 0;
+    for (g, i) in core_ids {
+        while k < by_gid.len() && by_gid[k].0 < g {
+            k += 1;
+        }
+        if k < by_gid.len() && by_gid[k].0 == g && by_gid[k].1.is_candidate(tau) {
+            cand.push(i);
+        }
+    }
+    cand.par_sort_unstable();
+    cand
+}
+
 /// The fit residual of every point in `which`, for neighbourhood radius `r`; sparse
 /// neighbourhoods are widened up to `reach` (see [`Neighbourhood::reach`]). With `creases`
-/// (for clouds whose neighbourhoods are sized by the noise), a point that passes the crease
-/// test has its residual negated: see [`is_candidate`].
-pub fn residuals(cloud: &Cloud, which: &[u32], r: f64, reach: f64, creases: bool) -> Vec<f32> {
+/// (for clouds whose neighbourhoods are sized by the noise), points also take the crease test.
+pub fn residuals(cloud: &Cloud, which: &[u32], r: f64, reach: f64, creases: bool) -> Vec<Residual> {
     let nb = Neighbourhood { radius: r, reach, min: MIN_FIT_NEIGHBOURS, max: MAX_FIT_NEIGHBOURS, ordered: false };
     cloud.map_neighbourhoods(which, nb, Vec::new, |pts, i, buf| residual_of(cloud, i as usize, r, buf, pts, creases))
 }
 
-/// Whether a point with residual `r` (as [`residuals`] gives it) is a candidate at threshold
-/// `tau`: its residual exceeds tau, or it passed the crease test. (Tau is the mean of the
-/// residuals' magnitudes.)
-pub fn is_candidate(r: f32, tau: f64) -> bool {
-    r < 0.0 || r as f64 > tau
-}
-
-fn residual_of(cloud: &Cloud, i: usize, r: f64, buf: &[(u32, f32)], pts: &mut Vec<(DVec3, f64)>, creases: bool) -> f32 {
+fn residual_of(cloud: &Cloud, i: usize, r: f64, buf: &[(u32, f32)], pts: &mut Vec<(DVec3, f64)>, creases: bool) -> Residual {
     if buf.len() < 8 {
         // Too sparse to fit a quadratic: not evidence of a feature.
-        return 0.0;
+        return Residual::default();
     }
     // Gaussian weights on the neighbourhood's own scale (wider where it was widened).
     let reach2 = buf.iter().map(|&(_, d2)| d2 as f64).fold(r * r, f64::max);
@@ -54,14 +113,11 @@ fn residual_of(cloud: &Cloud, i: usize, r: f64, buf: &[(u32, f32)], pts: &mut Ve
     pts.clear();
     pts.extend(buf.iter().map(|&(j, d2)| (cloud.at(j as usize), (-(d2 as f64) / h2).exp())));
     let x = cloud.at(i);
-    let Some(pca) = Pca::of_near(pts.iter().copied(), x) else { return 0.0 };
+    let Some(pca) = Pca::of_near(pts.iter().copied(), x) else { return Residual::default() };
     let frame = Frame::new(pca.mean, pca.normal());
-    let Some(quad) = Quadric::fit(frame, pts.iter().copied(), 1e-6) else { return 0.0 };
+    let Some(quad) = Quadric::fit(frame, pts.iter().copied(), 1e-6) else { return Residual::default() };
     let residual = pts.iter().map(|&(p, _)| quad.value(p).abs()).fold(0.0, f64::max) as f32;
-    if creases && residual > 0.0 && crease_across(pts, x, &quad) {
-        return -residual;
-    }
-    residual
+    Residual { value: residual, crease: creases && residual > 0.0 && crease_across(pts, x, &quad) }
 }
 
 /// True if two planes, fitted to the weighted points on either side of `x` across the
@@ -116,7 +172,7 @@ impl ResidualSum {
     pub fn of(residuals: impl IntoIterator<Item = f32>) -> ResidualSum {
         let mut s = ResidualSum::default();
         for x in residuals {
-            // (Residuals are distances, far below 2^64 model units; a negative one marks a crease.)
+            // (Residuals are distances, far below 2^64 model units.)
             s.sum += (x.abs() as f64 * Self::SCALE).round() as u128;
             s.count += 1;
         }
@@ -140,7 +196,7 @@ impl ResidualSum {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::rng::Rng;
+    use crate::rng::Rng;
 
     /// 180 points of `surface(x, y)` over a disc of radius 0.15, moved by noise uniform in a
     /// ball of radius 0.025 (fandisk's fit neighbourhoods at 0.01 dB), with the residual pass's
@@ -182,11 +238,11 @@ mod tests {
     }
 
     #[test]
-    fn negative_residuals_mark_candidates_and_count_by_magnitude() {
-        assert!(is_candidate(-0.001, 0.5));
-        assert!(is_candidate(0.6, 0.5));
-        assert!(!is_candidate(0.4, 0.5));
-        assert_eq!(ResidualSum::of([-0.25f32, 0.75]).mean(), 0.5);
+    fn creases_and_residuals_above_tau_are_candidates() {
+        assert!(Residual { value: 0.001, crease: true }.is_candidate(0.5));
+        assert!(Residual { value: 0.6, crease: false }.is_candidate(0.5));
+        assert!(!Residual { value: 0.4, crease: false }.is_candidate(0.5));
+        assert_eq!(ResidualSum::of([0.25f32, 0.75]).mean(), 0.5);
     }
 
     #[test]

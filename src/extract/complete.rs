@@ -17,7 +17,7 @@
 //! inverse-distance Laplacian smoothing in Taubin's shrink-free form, with ends and corners fixed.
 
 use glam::DVec3;
-use std::collections::HashMap;
+use crate::grid::HashGrid;
 
 /// A curve being completed.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,48 +125,11 @@ fn in_cone(x: DVec3, t: DVec3, q: DVec3, cos: f64, near: f64) -> bool {
     l <= near || d.dot(t) >= cos * l
 }
 
-/// A uniform hash grid over positions; a query visits every cell a ball touches, so the cost
-/// of a lookup does not grow with the number of curves (the edge cloud of a whole scan can
-/// grow thousands of them).
-struct Grid<T> {
-    cell: f64,
-    map: HashMap<[i64; 3], Vec<T>>,
-}
-
-impl<T: Copy> Grid<T> {
-    fn new(cell: f64) -> Grid<T> {
-        Grid { cell: cell.max(f64::MIN_POSITIVE), map: HashMap::new() }
-    }
-
-    fn key(&self, p: DVec3) -> [i64; 3] {
-        (p / self.cell).floor().to_array().map(|c| c as i64)
-    }
-
-    fn insert(&mut self, p: DVec3, t: T) {
-        self.map.entry(self.key(p)).or_default().push(t);
-    }
-
-    /// Calls `f` for every item in the cells that the ball of radius `r` around `p` touches
-    /// (a superset of the items within `r`; callers test the distance).
-    fn near(&self, p: DVec3, r: f64, mut f: impl FnMut(T)) {
-        let (lo, hi) = (self.key(p - DVec3::splat(r)), self.key(p + DVec3::splat(r)));
-        for x in lo[0]..=hi[0] {
-            for y in lo[1]..=hi[1] {
-                for z in lo[2]..=hi[2] {
-                    if let Some(items) = self.map.get(&[x, y, z]) {
-                        items.iter().for_each(|&t| f(t));
-                    }
-                }
-            }
-        }
-    }
-}
-
 /// Connects ends to the corners of the projection stage.
 fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
     let reach = p.reach * p.step;
     let cos = p.aperture_deg.to_radians().cos();
-    let mut grid = Grid::new(reach);
+    let mut grid = HashGrid::new(reach);
     for (k, &q) in corners.iter().enumerate() {
         grid.insert(q, k);
     }
@@ -211,13 +174,13 @@ fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
 /// The vertices of all curves in a grid. A curve that changes gets a new version and its
 /// vertices are added again; entries of older versions are skipped.
 struct Vertices {
-    grid: Grid<(u32, u32, u32)>,
+    grid: HashGrid<(u32, u32, u32)>,
     version: Vec<u32>,
 }
 
 impl Vertices {
     fn new(curves: &[Curve], cell: f64) -> Vertices {
-        let mut v = Vertices { grid: Grid::new(cell), version: vec![] };
+        let mut v = Vertices { grid: HashGrid::new(cell), version: vec![] };
         for ci in 0..curves.len() {
             v.update(curves, ci);
         }

@@ -43,8 +43,8 @@ pub fn confirmed(points: &[DVec3], normals: &[[Vec3; 2]], own: usize, radius: f6
         return vec![];
     }
     let index = Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>());
-    let slack = super::cloud::rounding_slack(points.iter().fold(0.0f64, |m, q| m.max(q.abs().max_element())));
-    let r32 = super::cloud::query_radius(radius, slack);
+    let slack = super::neighbourhood::rounding_slack(points.iter().fold(0.0f64, |m, q| m.max(q.abs().max_element())));
+    let r32 = super::neighbourhood::query_radius(radius, slack);
     let cos = AGREE_DEG.to_radians().cos() as f32;
     let agree = |a: &[Vec3; 2], b: &[Vec3; 2]| {
         let close = |u: Vec3, v: Vec3| u.dot(v).abs() >= cos;
@@ -73,7 +73,7 @@ pub fn confirmed(points: &[DVec3], normals: &[[Vec3; 2]], own: usize, radius: f6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::rng::Rng;
+    use crate::rng::Rng;
 
     /// Normals of a crease along x between planes tilted by +-`half` degrees about x.
     fn crease_normals(half: f64) -> [Vec3; 2] {

@@ -383,7 +383,7 @@ mod tests {
     #[test]
     fn pca_is_an_eigen_decomposition_at_any_scale_and_shape() {
         // Planes, lines and blobs, at scales from micrometres to kilometres.
-        let mut rng = crate::synth::rng::Rng::stream(7, 0);
+        let mut rng = crate::rng::Rng::stream(7, 0);
         for case in 0..600 {
             let scale = 10f64.powi(case % 10 - 6);
             // (Exact lines and planes, axis-aligned in every third case, have double or

@@ -11,10 +11,13 @@
 //! (an edge point keeping both normals); with three or more, a corner point is also solved.
 //! Projections that move farther than the neighbourhood radius are culled (2008).
 
-use super::cloud::{Cloud, Neighbourhood};
+use super::neighbourhood::{Cloud, Neighbourhood};
 use super::fit::{project_to_corner, project_to_intersection, Frame, Pca, Quadric};
-use crate::synth::rng::Rng;
+use super::params::Resolved;
+use crate::keys::position_key;
+use crate::rng::Rng;
 use glam::DVec3;
+use serde::{Deserialize, Serialize};
 
 /// A candidate projected onto the intersection of two surfaces.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -129,6 +132,53 @@ const CORE_FRACTION: f64 = 0.5;
 const REFINE_ROUNDS: usize = 5;
 /// Most surfaces looked for.
 const MAX_SURFACES: usize = 4;
+
+/// A point of the edge cloud in world coordinates, with the normals of its two surfaces.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WorldEdge {
+    /// Position.
+    pub p: DVec3,
+    /// Surface normals.
+    pub n: [glam::Vec3; 2],
+}
+
+/// A corner point in world coordinates with its grouping weight.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WorldCorner {
+    /// Position.
+    pub p: DVec3,
+    /// Weight 1 / |corner - edge point|.
+    pub w: f64,
+}
+
+/// What stage 2 made of one tile's candidates.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TileEdges {
+    /// Edge points.
+    pub edges: Vec<WorldEdge>,
+    /// Corner points.
+    pub corners: Vec<WorldCorner>,
+    /// Candidates projected.
+    pub candidates: u64,
+    /// Candidates that lay on one surface only (dropped as outliers).
+    pub one_surface: u64,
+}
+
+/// Stage 2 for one tile: projects the `candidates` (indices into the tile's `cloud`) with the
+/// parameters `r`. Returns edge and corner points in world coordinates.
+pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges {
+    // Each candidate's random stream is keyed by its position (on a grid far finer than the
+    // spacing), not by its id, so the same point gets the same stream in any file layout.
+    let q = r.kappa / 4096.0;
+    let ids: Vec<u64> = candidates.iter().map(|&i| position_key(cloud.at(i as usize) + cloud.origin, q)).collect();
+    let pp = ProjectParams { radius: r.rmls_radius, reach: r.halo(), min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed, noise: r.noise };
+    let projected = project(cloud, candidates, &ids, &pp);
+    let one_surface = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
+    let o = cloud.origin;
+    let edges = projected.iter().filter_map(|x| x.edge).map(|e| WorldEdge { p: e.p + o, n: [e.n[0].as_vec3(), e.n[1].as_vec3()] }).collect();
+    let corners = projected.iter().filter_map(|x| x.corner).map(|c| WorldCorner { p: c.p + o, w: c.w }).collect();
+    TileEdges { edges, corners, candidates: candidates.len() as u64, one_surface }
+}
 
 /// Projects every candidate (by index into `cloud`). `ids` gives each candidate a global
 /// identity so that its random stream does not depend on tiling or thread count.

@@ -37,7 +37,7 @@ pub fn smooth(points: &[DVec3], own: usize, corners: &[DVec3], p: &SmoothParams)
     }
     // (The f32 copy is only the tree's input.)
     let index = Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>());
-    let slack = super::cloud::rounding_slack(points.iter().fold(0.0f64, |m, q| m.max(q.abs().max_element())));
+    let slack = super::neighbourhood::rounding_slack(points.iter().fold(0.0f64, |m, q| m.max(q.abs().max_element())));
     let corner_index = (!corners.is_empty()).then(|| Index::new(&corners.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
     let key = |j: u32| points[j as usize].to_array().map(f64::to_bits);
     (0..own)
@@ -54,7 +54,7 @@ pub fn smooth(points: &[DVec3], own: usize, corners: &[DVec3], p: &SmoothParams)
             // (Queried a little wide: whether a point is within the radius is decided below,
             // in f64.) Most neighbourhoods are linear within a few points, so the nearest
             // FIRST_K - 1 are asked for first, and the rest only if they do not suffice.
-            let r32 = super::cloud::query_radius(radius, slack);
+            let r32 = super::neighbourhood::query_radius(radius, slack);
             let mut best: Option<Pca> = None;
             let mut k = MIN_K;
             for want in [FIRST_K, MAX_K] {
@@ -105,7 +105,7 @@ pub fn smooth(points: &[DVec3], own: usize, corners: &[DVec3], p: &SmoothParams)
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::rng::Rng;
+    use crate::rng::Rng;
 
     /// Noisy points along two segments meeting at a corner.
     fn polyline_cloud() -> Vec<DVec3> {

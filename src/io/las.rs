@@ -5,7 +5,7 @@
 //! handful of loads per point); LAZ records are decompressed by `las`/`laz` in chunks, in
 //! parallel where the file has chunk tables, and decoded the same way.
 
-use crate::cloud::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
+use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
 use crate::error::{io_input, Error, Result};
 use glam::DVec3;
 use memmap2::Mmap;

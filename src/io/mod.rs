@@ -10,7 +10,7 @@ mod write;
 
 pub use write::{PointWriter, WriteOptions};
 
-use crate::cloud::{Bounds, CloudHeader, FileFormat, PointChunk};
+use crate::points::{Bounds, CloudHeader, FileFormat, PointChunk};
 use crate::error::{io_input, Error, Result};
 use std::path::{Path, PathBuf};
 

@@ -2,7 +2,7 @@
 //! read (as float or double); every other property and element is skipped. Binary files are
 //! memory-mapped.
 
-use crate::cloud::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
+use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
 use crate::error::{io_input, Error, Result};
 use glam::DVec3;
 use memmap2::Mmap;

@@ -1,6 +1,6 @@
 //! Streaming point output (LAS/LAZ through the `las` crate, binary PLY), used by `crease synth`.
 
-use crate::cloud::FileFormat;
+use crate::points::FileFormat;
 use crate::error::{Error, Result};
 use glam::DVec3;
 use std::fs::File;

@@ -8,17 +8,16 @@
 //! `noise * dB`, with dB the bounding-box diagonal of the clean cloud.
 
 pub mod mesh;
-pub mod rng;
 pub mod scene;
 pub mod shapes;
 pub mod surface;
 
-use crate::cloud::Bounds;
+use crate::points::Bounds;
 use crate::curves::{write_obj, Polyline};
 use crate::error::{Error, Result};
 use crate::io::{PointWriter, WriteOptions};
 use glam::DVec3;
-use rng::Rng;
+use crate::rng::Rng;
 use shapes::Shape;
 use std::path::{Path, PathBuf};
 use surface::AreaTable;
@@ -50,6 +49,13 @@ pub struct SynthOptions {
     pub sampling: Sampling,
     /// Random seed.
     pub seed: u64,
+}
+
+impl Default for SynthOptions {
+    /// 500 k points, uniform, no noise or outliers, seed 1 (as `crease synth`).
+    fn default() -> Self {
+        SynthOptions { n: 500_000, noise: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: 1 }
+    }
 }
 
 /// Samples `opts.n` points of `shape` (noise and outliers applied).

@@ -7,7 +7,7 @@
 //! building standing on the pavement. Every block is generated from its own random stream, so
 //! the output is deterministic by seed.
 
-use super::rng::Rng;
+use crate::rng::Rng;
 use super::surface::{AreaTable, Frame, Surface};
 use super::truth_polylines;
 use crate::curves::write_obj;

@@ -1,7 +1,7 @@
 //! Surfaces that can be sampled uniformly by area: triangles, planar polygons with holes
 //! (sampled by rejection) and height fields. Curved CAD faces are fine strips of triangles.
 
-use super::rng::Rng;
+use crate::rng::Rng;
 use glam::{DVec2, DVec3};
 
 /// A planar frame: world = origin + u * x + v * y.

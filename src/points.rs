@@ -147,3 +147,12 @@ impl PointChunk {
         self.index.clear();
     }
 }
+
+/// Points of a tile: world positions and global ids.
+#[derive(Clone, Debug, Default)]
+pub struct TilePoints {
+    /// Positions.
+    pub xyz: Vec<DVec3>,
+    /// Global ids.
+    pub gid: Vec<u64>,
+}

@@ -376,7 +376,7 @@ impl Cloud {
         let mut order: Vec<(u64, u32)> = match &self.cells {
             Some(cells) => at.par_iter().enumerate().map(|(k, &q)| (cells.key(q), k as u32)).collect(),
             None => {
-                let cell = |q: DVec3| (q / (BLOCK_CELL * r)).floor().as_i64vec3().to_array();
+                let cell = |q: DVec3| crate::grid::cell(q, BLOCK_CELL * r).to_array();
                 let mut by: Vec<([i64; 3], u32)> = at.iter().enumerate().map(|(k, &q)| (cell(q), k as u32)).collect();
                 by.par_sort_unstable();
                 let mut id = 0u64;
@@ -488,7 +488,7 @@ impl Cells {
 
     /// Cell coordinates of local position `q`, clamped to the grid.
     fn cell(&self, q: DVec3) -> [i64; 3] {
-        (q / self.side).floor().as_i64vec3().to_array().map(|c| c.clamp(0, self.last))
+        crate::grid::cell(q, self.side).to_array().map(|c| c.clamp(0, self.last))
     }
 
     fn pack(c: [i64; 3]) -> u64 {
@@ -665,7 +665,7 @@ mod tests {
     fn ordered_neighbourhoods_are_the_same_with_and_without_the_coordinate_ranks() {
         // A jittered grid with repeated coordinates (ties broken by global id), and a cell
         // dense enough that the ball must be thinned.
-        let mut rng = crate::synth::rng::Rng::stream(3, 0);
+        let mut rng = crate::rng::Rng::stream(3, 0);
         let mut world: Vec<DVec3> = (0..4000).map(|_| DVec3::new(rng.f64(), rng.f64(), 0.01 * rng.f64()) * 10.0).collect();
         for k in 0..500 {
             world.push(world[k * 3]);
@@ -750,7 +750,7 @@ mod tests {
         // Points just inside (and just outside) a small ball a kilometre from the cloud's
         // origin, where f32 coordinates are rounded by far more than the ball's relative
         // margin: membership must still follow the f64 distances.
-        let mut rng = crate::synth::rng::Rng::stream(3, 0);
+        let mut rng = crate::rng::Rng::stream(3, 0);
         let r = 0.1;
         let centres: Vec<DVec3> = (0..20).map(|k| DVec3::new(1000.0 + k as f64 * 0.731, 700.0 + k as f64 * 0.377, 50.0)).collect();
         let mut world = vec![DVec3::ZERO];

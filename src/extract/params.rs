@@ -1,0 +1,141 @@
+//! The method's parameters: what the user gives ([`Params`]), and every default resolved from
+//! the measured spacing and noise ([`Resolved`]).
+
+use super::statistics::{median, PointStats};
+use crate::keys::settle;
+use serde::{Deserialize, Serialize};
+
+/// User parameters; every length is in model units and defaults to a multiple of the point
+/// spacing kappa (the median nearest-neighbour distance).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Params {
+    /// Point spacing kappa (default: estimated).
+    pub kappa: Option<f64>,
+    /// Neighbourhood radius of the candidate fit (default 6 kappa).
+    pub fit_radius: Option<f64>,
+    /// Neighbourhood radius of the robust projection (default 9 kappa).
+    pub rmls_radius: Option<f64>,
+    /// Residual threshold tau (default: mean residual over all points).
+    pub tau: Option<f64>,
+    /// Polyline step s_max (default 4.5 kappa).
+    pub step: Option<f64>,
+    /// Largest turn while growing, degrees (default 30).
+    pub max_turn_deg: Option<f64>,
+    /// Creases whose surface normals differ by less than this many degrees are ignored
+    /// (default 28).
+    pub min_angle_deg: Option<f64>,
+    /// Seed of the robust fits' random streams (default 1).
+    pub seed: Option<u64>,
+}
+
+/// Parameters with every default resolved to a value.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Resolved {
+    /// Point spacing (median nearest-neighbour distance).
+    pub kappa: f64,
+    /// Estimated noise: standard deviation of points about their local plane.
+    pub noise: f64,
+    /// Length unit of the defaults: max(kappa, 2 noise), so neighbourhoods outgrow the noise.
+    pub scale: f64,
+    /// Share of points used by the fits (1: all; less when noise makes neighbourhoods large).
+    pub keep: f64,
+    /// Candidate fit radius.
+    pub fit_radius: f64,
+    /// Robust projection radius.
+    pub rmls_radius: f64,
+    /// Smallest inlier threshold of the robust fits.
+    pub min_threshold: f64,
+    /// Polyline step.
+    pub step: f64,
+    /// Largest turn while growing, degrees.
+    pub max_turn_deg: f64,
+    /// Gentlest crease kept, degrees between the surface normals.
+    pub min_angle_deg: f64,
+    /// Corner grouping radius.
+    pub corner_radius: f64,
+    /// Completion search reach, in steps.
+    pub reach_steps: f64,
+    /// Completion cone half-aperture, degrees.
+    pub aperture_deg: f64,
+    /// Smoothing linearity target.
+    pub linearity: f64,
+    /// Random seed.
+    pub seed: u64,
+}
+
+/// Neighbours a fit should see; denser clouds are thinned to about this many.
+pub const TARGET_NEIGHBOURS: f64 = 150.0;
+/// The default length unit is at least this many noise deviations.
+pub const NOISE_SCALE: f64 = 1.5;
+
+impl Resolved {
+    /// The halo a tile needs around its core for stages 1-2: the widest neighbourhood they
+    /// read, with a margin. Sparse neighbourhoods are widened no farther, so that every
+    /// point's neighbourhood is the same in any tiling.
+    pub fn halo(&self) -> f64 {
+        1.25 * self.fit_radius.max(self.rmls_radius)
+    }
+
+    /// Side of the grid cells a tile's cloud is stored by for stages 1-2 (see
+    /// [`Cloud::gridded`](super::neighbourhood::Cloud::gridded)): the same for both, so that the two passes load a tile in the same
+    /// order. 1.5 fit radii, the block size that made the fewest instructions (see
+    /// `BLOCK_CELL` in `cloud.rs`) for the residual pass, whose many cheap fits feel it most.
+    /// (10 M scene, two runs each: 52.9-54.1 s of CPU; 52.9-56.5 s with 1.5 times the mean of
+    /// the radii, 55.1-56.4 s with 1.5 projection radii.)
+    pub fn cell_side(&self) -> f64 {
+        1.5 * self.fit_radius
+    }
+
+    /// True if the neighbourhoods are sized by the noise rather than by the spacing (see
+    /// [`NOISE_SCALE`]): the candidates then also take the crease test (see
+    /// [`CREASE_RATIO`](super::candidates::CREASE_RATIO)), and edge points the consensus filter (see [`consensus`](super::consensus)).
+    pub fn noise_limited(&self) -> bool {
+        self.scale > self.kappa
+    }
+}
+
+impl Params {
+    /// Resolves defaults given the measured spacing `kappa` and noise `noise`.
+    pub fn resolve(&self, kappa: f64, noise: f64) -> Resolved {
+        let kappa = self.kappa.unwrap_or(kappa);
+        let scale = kappa.max(NOISE_SCALE * noise);
+        let rmls = self.rmls_radius.unwrap_or(9.0 * scale);
+        let step = self.step.unwrap_or(4.5 * scale);
+        Resolved {
+            kappa,
+            noise,
+            scale,
+            keep: 1.0,
+            fit_radius: self.fit_radius.unwrap_or(6.0 * scale),
+            rmls_radius: rmls,
+            min_threshold: 0.05 * scale,
+            step,
+            max_turn_deg: self.max_turn_deg.unwrap_or(30.0),
+            min_angle_deg: self.min_angle_deg.unwrap_or(28.0),
+            corner_radius: rmls,
+            reach_steps: 4.0,
+            aperture_deg: 45.0,
+            linearity: 0.7,
+            seed: self.seed.unwrap_or(1),
+        }
+    }
+}
+
+/// Resolves the parameters from the sampled statistics: spacing and noise are their medians;
+/// `keep` thins the cloud so that a fit sees about [`TARGET_NEIGHBOURS`] points. A kappa given
+/// by the user replaces the measured one.
+pub fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
+    let mut k: Vec<f64> = stats.iter().map(|s| s.spacing).collect();
+    let mut n: Vec<f64> = stats.iter().map(|s| s.noise).collect();
+    let mut d: Vec<f64> = stats.iter().map(|s| s.density).collect();
+    let mut r = params.resolve(settle(median(&mut k)), settle(median(&mut n)));
+    let count = median(&mut d) * std::f64::consts::PI * r.fit_radius.powi(2);
+    r.keep = if count > 0.0 { (TARGET_NEIGHBOURS / count).min(1.0) } else { 1.0 };
+    if r.keep >= 0.7 {
+        r.keep = 1.0;
+    }
+    if let Some(k) = params.kappa {
+        r.kappa = k;
+    }
+    r
+}

@@ -1,0 +1,217 @@
+//! Stages 3 to 5 on edge clouds: corner grouping, smoothing (block by block, with the edge
+//! points around a block as context), the consensus filter, polyline growing and completion,
+//! and the normals each curve vertex carries.
+
+use super::complete;
+use super::consensus;
+use super::grow;
+use super::params::Resolved;
+use super::project::{self, WorldCorner, WorldEdge};
+use super::smooth;
+use crate::curves::{Polyline, Vertex};
+use crate::debug::DebugDump;
+use crate::keys::{bits_key, snap, snap_quantum};
+use crate::spatial::Index;
+use glam::DVec3;
+use std::time::Instant;
+
+/// Snaps an edge point's position to quantum `q` and its normals to a millionth.
+pub fn snap_edge(e: &mut WorldEdge, q: f64) {
+    e.p = snap(e.p, q);
+    e.n = e.n.map(|n| (n * 1e6).round() / 1e6 + glam::Vec3::ZERO);
+}
+
+fn normal_key(n: &[glam::Vec3; 2]) -> [[u32; 3]; 2] {
+    [n[0].to_array(), n[1].to_array()].map(|v| v.map(f32::to_bits))
+}
+
+/// Corner grouping over all corner points of the cloud, in any order; the grouped corners are
+/// returned relative to `origin`.
+pub fn group_corners(mut corners: Vec<WorldCorner>, origin: DVec3, r: &Resolved) -> Vec<DVec3> {
+    let q = snap_quantum(r.kappa);
+    for c in corners.iter_mut() {
+        c.p = snap(c.p, q);
+        c.w = (c.w * q).round() / q;
+    }
+    corners.sort_unstable_by(|a, b| bits_key(a.p).cmp(&bits_key(b.p)).then(a.w.total_cmp(&b.w)));
+    let local: Vec<project::CornerPoint> = corners.iter().map(|c| project::CornerPoint { p: c.p - origin, w: c.w }).collect();
+    project::group_corners(&local, r.corner_radius, 3)
+}
+
+/// Largest distance from an edge point to the edge points that move it in stage 3: a block
+/// of the edge cloud is smoothed exactly as in the whole cloud if every edge point this close
+/// to the block is given as context.
+pub fn smoothing_reach(r: &Resolved) -> f64 {
+    2.0 * r.rmls_radius
+}
+
+/// Stage 3 for a block of the (snapped) edge cloud, positions relative to `origin`: the first
+/// `own` points are smoothed, the rest are the context within [`smoothing_reach`] of them.
+/// The smoothed positions are snapped as the input is.
+pub fn smooth_block(points: &[DVec3], own: usize, grouped: &[DVec3], r: &Resolved) -> Vec<DVec3> {
+    let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: smoothing_reach(r) };
+    let q = snap_quantum(r.kappa);
+    let mut out = smooth::smooth(points, own, grouped, &sp);
+    for p in out.iter_mut() {
+        *p = snap(*p, q);
+    }
+    out
+}
+
+/// The smoothed edge cloud (positions relative to an origin, and the normals of each point's
+/// two surfaces), as stages 4 and 5 take it.
+#[derive(Clone, Debug, Default)]
+pub struct SmoothedEdges {
+    /// Smoothed positions.
+    pub points: Vec<DVec3>,
+    /// The two surface normals of each.
+    pub normals: Vec<[glam::Vec3; 2]>,
+    /// Edge points dropped by the consensus filter.
+    pub unconfirmed: u64,
+}
+
+/// Stage 3 and, on noise-limited clouds (see [`Resolved::noise_limited`]), the consensus filter
+/// for a block of the edge cloud (see [`smooth_block`]; the normals are those of `points`,
+/// context included): appends the smoothed positions of the first `own` points that their
+/// neighbours confirm (see [`consensus`]), with their normals, to `out`, and counts those
+/// dropped. (The smoothing takes every edge point as context, confirmed or not, so that the
+/// block's context need reach no further.)
+pub fn smooth_and_confirm(points: &[DVec3], normals: &[[glam::Vec3; 2]], own: usize, grouped: &[DVec3], r: &Resolved, out: &mut SmoothedEdges) {
+    let smoothed = smooth_block(points, own, grouped, r);
+    // (Without noise, edge points off a crease are rare and the filter mostly cut sparse
+    // stretches into more pieces: nonuniformly sampled fandisk 34 -> 45 curves, the 5 M scene
+    // 366 -> 376; so it runs where the neighbourhoods are sized by the noise.)
+    let keep = if r.noise_limited() { consensus::confirmed(points, normals, own, r.step) } else { vec![true; own] };
+    let before = out.points.len();
+    for ((p, n), k) in smoothed.into_iter().zip(&normals[..own]).zip(keep) {
+        if k {
+            out.points.push(p);
+            out.normals.push(*n);
+        }
+    }
+    out.unconfirmed += (own - (out.points.len() - before)) as u64;
+}
+
+/// Curves, with what stages 4 and 5 counted and how long they took.
+#[derive(Clone, Debug, Default)]
+pub struct Traced {
+    /// Feature curves in world coordinates.
+    pub curves: Vec<Polyline>,
+    /// Polylines grown (before completion).
+    pub grown: u64,
+    /// Seconds of stage 4.
+    pub growing_seconds: f64,
+    /// Seconds of stage 5.
+    pub completion_seconds: f64,
+}
+
+/// Stages 4 and 5 on the whole smoothed edge cloud (positions relative to `origin`), in any
+/// order: polyline growing and completion.
+pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3, r: &Resolved, debug: &DebugDump) -> Traced {
+    // Sorted first, so the result does not depend on the order the points arrive in. (The
+    // edge cloud is the one part of a run that grows with the whole input, not with a tile:
+    // it is reordered through a permutation rather than as records, so that at most one
+    // extra copy of one of its columns exists at a time.)
+    use rayon::prelude::*;
+    let SmoothedEdges { points, normals, .. } = edges;
+    let mut perm: Vec<u32> = (0..points.len() as u32).collect();
+    // (Points equal in position and normals are interchangeable: the unstable order of
+    // such ties changes nothing.)
+    perm.par_sort_unstable_by(|&a, &b| {
+        let (a, b) = (a as usize, b as usize);
+        bits_key(points[a]).cmp(&bits_key(points[b])).then(normal_key(&normals[a]).cmp(&normal_key(&normals[b])))
+    });
+    let points = permute(points, &perm);
+    let normals = permute(normals, &perm);
+    drop(perm);
+    debug.points("smoothed.obj", &points, origin);
+    debug.points("corners.obj", grouped, origin);
+    let t = Instant::now();
+    let index = (!points.is_empty()).then(|| Index::new_parallel(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
+    let grown = index.as_ref().map_or(vec![], |ix| grow::grow(&points, ix, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg }));
+    if debug.on() {
+        let pl: Vec<Polyline> = grown.iter().enumerate().map(|(i, g)| Polyline::from_points(i as u32, g.vertices.iter().map(|p| *p + origin))).collect();
+        debug.polylines("grown.obj", &pl);
+    }
+    let mut traced = Traced { grown: grown.len() as u64, growing_seconds: t.elapsed().as_secs_f64(), ..Default::default() };
+    let t = Instant::now();
+    let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2, corner_zone: r.corner_radius };
+    let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), grouped, &cp);
+    traced.curves = to_polylines(&curves, index.as_ref(), &normals, origin, r.step);
+    traced.completion_seconds = t.elapsed().as_secs_f64();
+    traced
+}
+
+/// `v` reordered by `perm` (consumed, so that the unordered copy is freed at once).
+fn permute<T: Copy>(v: Vec<T>, perm: &[u32]) -> Vec<T> {
+    perm.iter().map(|&i| v[i as usize]).collect()
+}
+
+/// Attaches normals (from the nearest edge points, orientation carried along each curve) and
+/// converts to world coordinates.
+fn to_polylines(curves: &[complete::Curve], index: Option<&Index>, edge_normals: &[[glam::Vec3; 2]], origin: DVec3, step: f64) -> Vec<Polyline> {
+    let mut nn = Vec::new();
+    curves
+        .iter()
+        .enumerate()
+        .map(|(id, c)| {
+            let mut prev: Option<[DVec3; 2]> = None;
+            let mut normals = vec![[DVec3::ZERO; 2]; c.v.len()];
+            for (i, &p) in c.v.iter().enumerate() {
+                if c.corner[i] {
+                    continue;
+                }
+                nn.clear();
+                if let Some(ix) = index {
+                    ix.within(&p.as_vec3().to_array(), (0.5 * step) as f32, &mut nn);
+                    if nn.is_empty() {
+                        ix.nearest_n(&p.as_vec3().to_array(), 1, &mut nn);
+                    }
+                }
+                nn.sort_unstable_by_key(|a| a.0);
+                let mut acc = [DVec3::ZERO; 2];
+                let pair = |j: u32| edge_normals[j as usize].map(|v| v.as_dvec3());
+                for &(j, _) in &nn {
+                    let n = pair(j);
+                    let reference = prev.unwrap_or(pair(nn[0].0));
+                    acc[0] += align(n, reference)[0];
+                    acc[1] += align(n, reference)[1];
+                }
+                let pair = [acc[0].normalize_or_zero(), acc[1].normalize_or_zero()];
+                if pair[0] != DVec3::ZERO {
+                    normals[i] = pair;
+                    prev = Some(pair);
+                }
+            }
+            // Corners take the normals of their neighbour on the curve.
+            for i in 0..c.v.len() {
+                if c.corner[i] {
+                    let j = if i == 0 { 1.min(c.v.len() - 1) } else { i - 1 };
+                    normals[i] = normals[j];
+                }
+            }
+            Polyline {
+                id: id as u32,
+                closed: c.closed,
+                vertices: c
+                    .v
+                    .iter()
+                    .zip(&normals)
+                    .zip(&c.corner)
+                    .map(|((&p, n), &corner)| Vertex { p: p + origin, n: [n[0].as_vec3(), n[1].as_vec3()], corner })
+                    .collect(),
+            }
+        })
+        .collect()
+}
+
+/// Orders and signs the normal pair `n` to agree with `reference`.
+fn align(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
+    let straight = n[0].dot(reference[0]).abs() + n[1].dot(reference[1]).abs();
+    let crossed = n[1].dot(reference[0]).abs() + n[0].dot(reference[1]).abs();
+    let [a, b] = if crossed > straight { [n[1], n[0]] } else { n };
+    let a = if a.dot(reference[0]) < 0.0 { -a } else { a };
+    let b = if b.dot(reference[1]) < 0.0 { -b } else { b };
+    [a, b]
+}
+

@@ -1,0 +1,280 @@
+//! The statistics pass: spacing, noise and density at a sample of points, from which every
+//! length default is resolved (see [`super::params::resolve`]).
+//!
+//! A sample is chosen by position key, so it is the same in any tiling; each sampled point's
+//! spacing comes from its 16th neighbour, its noise from the RMS residual of a quadric fitted
+//! within 16 of those spacings (outliers dropped), its density from the count in that ball.
+
+use super::fit::{self, Pca};
+use super::neighbourhood::Cloud;
+use crate::keys::{keep_point, position_key};
+use crate::points::{Bounds, TilePoints};
+use crate::tiles::within;
+use glam::{DVec3, I64Vec3};
+use rayon::prelude::*;
+
+/// About this many points of a cloud are sampled (by position key).
+pub const STAT_SAMPLES: f64 = 20_000.0;
+
+/// How much wider than its first halo the statistics pass may reload a tile (see
+/// [`tile_statistics`]). Samples whose neighbourhood is wider still (isolated points) keep
+/// what the widest halo holds.
+pub const STATS_HALO_GROWTH: f64 = 4.0;
+
+/// What one sampled point says about the cloud.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointStats {
+    /// Spacing (median nearest-neighbour distance, from the 16th neighbour).
+    pub spacing: f64,
+    /// Noise: RMS residual about a quadric within 16 spacings.
+    pub noise: f64,
+    /// Points per unit area within 16 spacings.
+    pub density: f64,
+}
+
+/// True if the point with key `key` is one of the statistics sample in a cloud of `total`
+/// points.
+pub fn stat_sample(key: u64, total: u64, seed: u64) -> bool {
+    keep_point(key ^ 0x5A5A_5A5A, STAT_SAMPLES / total.max(1) as f64, seed)
+}
+
+/// Neighbourhood statistics of one sampled point: its spacing (from the 16th neighbour, see
+/// [`crate::spacing::spacing`]) and the RMS residual of a quadric fitted within 16 of those
+/// spacings (the noise).
+pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<PointStats> {
+    const K: usize = 16;
+    buf.clear();
+    // (A few more than K + 1 from the f32 tree, whose distances depend on the tile's origin in
+    // their last bits; the K-th neighbour's distance is then taken in f64, from the f64
+    // positions, so it is the same in every tile.)
+    cloud.index().nearest_n(&cloud.at(i).as_vec3().to_array(), K + 1 + 8, buf);
+    if buf.len() < K + 1 {
+        return None;
+    }
+    let q = cloud.at(i);
+    let mut d2: Vec<f64> = buf.iter().map(|b| cloud.at(b.0 as usize).distance_squared(q)).collect();
+    let rk = d2.select_nth_unstable_by(K, f64::total_cmp).1.sqrt();
+    let kappa = rk * (2f64.ln() / K as f64).sqrt();
+    // Points per unit area around this point, from the count in the 16-kappa ball.
+    let density = cloud.count_within(q, 16.0 * kappa, buf) as f64 / (std::f64::consts::PI * (16.0 * kappa).powi(2));
+    cloud.neighbours(q, 16.0 * kappa, 0, 128, buf);
+    if buf.len() < 10 {
+        return Some(PointStats { spacing: kappa, noise: 0.0, density });
+    }
+    // Fit, drop points beyond three robust deviations (outliers), fit again; the noise is the
+    // RMS residual of what remains.
+    let mut pts: Vec<DVec3> = buf.iter().map(|&(j, _)| cloud.at(j as usize)).collect();
+    let mut rms = 0.0;
+    for round in 0..2 {
+        let pca = Pca::of(pts.iter().map(|&p| (p, 1.0)))?;
+        let q = fit::Quadric::fit(fit::Frame::new(pca.mean, pca.normal()), pts.iter().map(|&p| (p, 1.0)), 1e-6)?;
+        let mut res: Vec<f64> = pts.iter().map(|&p| q.value(p).abs()).collect();
+        if round == 1 {
+            rms = (res.iter().map(|r| r * r).sum::<f64>() / res.len() as f64).sqrt();
+            break;
+        }
+        let limit = 3.0 * 1.4826 * median(&mut res.clone());
+        pts.retain(|&p| q.value(p).abs() <= limit);
+        if pts.len() < 10 {
+            return Some(PointStats { spacing: kappa, noise: 0.0, density });
+        }
+        let _ = &mut res;
+    }
+    Some(PointStats { spacing: kappa, noise: rms, density })
+}
+
+pub(crate) fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let m = v.len() / 2;
+    *v.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
+}
+
+
+/// A tile as the statistics pass sees it: the core box, the first halo, the position key
+/// quantum, the cloud's point count, and the seed of the sampling.
+#[derive(Clone, Copy, Debug)]
+pub struct StatsTile {
+    /// The tile's core.
+    pub core: Bounds,
+    /// The halo the tile was first loaded with.
+    pub halo: f64,
+    /// Quantum of the position keys (see [`crate::keys::key_quantum`]).
+    pub key_quantum: f64,
+    /// Points in the whole cloud.
+    pub total: u64,
+    /// Sampling seed.
+    pub seed: u64,
+}
+
+/// Statistics of the sampled points in a tile's core, in global id order, given the tile
+/// `first` loaded with halo `tile.halo` (with core flags); `reload(halo)` loads it again with a
+/// wider halo.
+///
+/// A sample's neighbourhood is 16 of its own spacings wide, so in a sparse region it can
+/// reach past the halo, and then it would depend on where the tile borders fall. Such samples
+/// are computed again with the tile reloaded with a halo wide enough for them (up to
+/// [`STATS_HALO_GROWTH`] times the first).
+pub fn tile_statistics(
+    first: (TilePoints, Vec<bool>),
+    tile: &StatsTile,
+    mut reload: impl FnMut(f64) -> crate::Result<(TilePoints, Vec<bool>)>,
+) -> crate::Result<Vec<PointStats>> {
+    let cap = STATS_HALO_GROWTH * tile.halo;
+    let (mut tp, mut is_core) = first;
+    let mut halo = tile.halo;
+    // Only the points within `reach` of a sample are indexed (None: all of them). A tile holds a
+    // few hundred samples at 100 M points, and their neighbourhoods a fifth of the points or
+    // less. A sample whose ball turns out wider is computed again with a wider reach.
+    let mut reach = Some(tile.halo);
+    let mut todo: Option<Vec<u64>> = None;
+    let mut done: Vec<(u64, PointStats)> = Vec::new();
+    loop {
+        let round = sample_round(&tp, &is_core, todo.as_deref(), reach, tile, halo, cap);
+        done.extend(round.done);
+        if round.again.is_empty() {
+            break;
+        }
+        reach = if round.need.is_finite() { reach.map(|k| (1.01 * round.need).max(2.0 * k)) } else { None };
+        if round.wider_halo {
+            halo = (1.01 * round.need).max(2.0 * halo).min(cap);
+            (tp, is_core) = reload(halo)?;
+        }
+        todo = Some(round.again);
+    }
+    done.sort_unstable_by_key(|d| d.0);
+    Ok(done.into_iter().map(|d| d.1).collect())
+}
+
+/// What one round of [`tile_statistics`] settled, and what it left for a wider one.
+struct Round {
+    /// Samples whose statistics are final, by global id.
+    done: Vec<(u64, PointStats)>,
+    /// Samples to compute again, in global id order.
+    again: Vec<u64>,
+    /// The widest ball the samples left over need.
+    need: f64,
+    /// True if some of them need a wider halo.
+    wider_halo: bool,
+}
+
+/// Computes the samples of the tile (those in `todo`, if given) with the points within `reach`
+/// of a sample indexed (all of them for None), the tile being loaded with `halo`.
+fn sample_round(tp: &TilePoints, is_core: &[bool], todo: Option<&[u64]>, reach: Option<f64>, tile: &StatsTile, halo: f64, cap: f64) -> Round {
+    // (Sampled by world position, read from the store, not rebuilt from the tile's
+    // local coordinates, whose round trip may not be exact.)
+    let sampled: Vec<bool> = tp
+        .xyz
+        .par_iter()
+        .zip(&tp.gid)
+        .zip(is_core)
+        .map(|((&p, g), &c)| c && stat_sample(position_key(p, tile.key_quantum), tile.total, tile.seed) && todo.is_none_or(|v| v.binary_search(g).is_ok()))
+        .collect();
+    // (The origin is the whole tile's, so the local coordinates are the same either way.)
+    let origin = tile_origin(tp);
+    let keep = reach.and_then(|r| near(&tp.xyz, &sampled, r));
+    let (cloud, sampled) = match &keep {
+        Some(keep) => {
+            let xyz: Vec<DVec3> = keep.iter().map(|&i| tp.xyz[i]).collect();
+            let gid: Vec<u64> = keep.iter().map(|&i| tp.gid[i]).collect();
+            (Cloud::with_origin_parallel(&xyz, &gid, origin), keep.iter().map(|&i| sampled[i]).collect())
+        }
+        None => (Cloud::with_origin_parallel(&tp.xyz, &tp.gid, origin), sampled),
+    };
+    let kept = keep.as_ref().and(reach);
+    // (The tree, on the pool, which would otherwise wait for it.)
+    cloud.index();
+    let sample: Vec<usize> = (0..cloud.len()).into_par_iter().filter(|&i| sampled[cloud.ids[i] as usize]).collect();
+    cloud.prepare_ordering(sample.len());
+    let stats: Vec<Option<PointStats>> = sample.par_iter().map_init(Vec::new, |buf, &i| point_stats(&cloud, i, buf)).collect();
+    let mut round = Round { done: Vec::new(), again: Vec::new(), need: 0.0, wider_halo: false };
+    for (&i, s) in sample.iter().zip(stats) {
+        // The widest ball the statistics read: the 16-spacing ball, with the margin of the
+        // tree query (unbounded if too few neighbours were found: more may lie farther).
+        let r = s.map_or(f64::INFINITY, |s| 16.0 * s.spacing * (1.0 + 1e-4));
+        // Whether it holds every point of the cloud: it lies within the points kept around
+        // the sample, and within the loaded halo (else, up to the widest halo).
+        let in_kept = kept.is_none_or(|k| r <= k);
+        let in_halo = s.is_some() && within(&tile.core, halo - r, cloud.at(i) + cloud.origin);
+        if in_kept && (in_halo || halo >= cap) {
+            if let Some(s) = s {
+                round.done.push((cloud.gid[i], s));
+            }
+        } else {
+            round.again.push(cloud.gid[i]);
+            round.need = round.need.max(r);
+            round.wider_halo |= !in_halo && halo < cap;
+        }
+    }
+    round.again.sort_unstable();
+    round
+}
+
+/// Local origin of a loaded tile: the minimum corner of its points (fits are computed in f64,
+/// so the choice only moves the last bits).
+pub fn tile_origin(tp: &TilePoints) -> DVec3 {
+    tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
+}
+
+/// Indices of the points of `xyz` within `radius` of a point flagged in `centre` (and of some
+/// a little farther), in order; None (keep every point) if that is most of them anyway, or if
+/// the grid of cells this takes would be too large.
+fn near(xyz: &[DVec3], centre: &[bool], radius: f64) -> Option<Vec<usize>> {
+    let lo = xyz.iter().copied().reduce(DVec3::min)?;
+    let hi = xyz.iter().copied().reduce(DVec3::max)?;
+    // Cells a little wider than the radius, so that rounding cannot put a point within the
+    // radius of a centre two cells away from it: such points lie in the centre's cell or in
+    // one of the 26 around it.
+    let side = radius * 1.01;
+    let dims = ((hi - lo) / side).floor().as_i64vec3() + 1;
+    let cells = dims.x.checked_mul(dims.y).and_then(|c| c.checked_mul(dims.z)).filter(|&c| c > 0 && c <= 1 << 28)?;
+    let cell = |p: DVec3| crate::grid::cell(p - lo, side).clamp(I64Vec3::ZERO, dims - 1);
+    let index = |c: I64Vec3| (c.x + dims.x * (c.y + dims.y * c.z)) as usize;
+    let mut marked = vec![false; cells as usize];
+    for (&p, _) in xyz.iter().zip(centre).filter(|c| *c.1) {
+        let c = cell(p);
+        for d in (0..27).map(|k| I64Vec3::new(k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1)) {
+            let n = c + d;
+            if n.cmpge(I64Vec3::ZERO).all() && n.cmplt(dims).all() {
+                marked[index(n)] = true;
+            }
+        }
+    }
+    let keep: Vec<usize> = (0..xyz.len()).filter(|&i| marked[index(cell(xyz[i]))]).collect();
+    (keep.len() * 4 < xyz.len() * 3).then_some(keep)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::near;
+    use glam::DVec3;
+
+    #[test]
+    fn near_keeps_every_point_within_the_radius_of_a_centre_and_drops_far_ones() {
+        let mut rng = crate::rng::Rng::stream(3, 0);
+        // Points on a tilted plane 1 km from the origin, a few of them centres.
+        let pts: Vec<DVec3> = (0..200_000).map(|_| DVec3::new(1000.0 + 50.0 * rng.f64(), -700.0 + 50.0 * rng.f64(), 0.0)).map(|p| DVec3::new(p.x, p.y, 0.3 * p.x - 0.2 * p.y)).collect();
+        let centre: Vec<bool> = (0..pts.len()).map(|i| i % 5000 == 17).collect();
+        let radius = 0.7;
+        let keep = near(&pts, &centre, radius).expect("a few centres keep a small share");
+        assert!(keep.windows(2).all(|w| w[0] < w[1]), "in order");
+        let centres: Vec<DVec3> = (0..pts.len()).filter(|&i| centre[i]).map(|i| pts[i]).collect();
+        let dist = |p: DVec3| centres.iter().map(|c| c.distance(p)).fold(f64::INFINITY, f64::min);
+        let kept: std::collections::HashSet<usize> = keep.iter().copied().collect();
+        for (i, &p) in pts.iter().enumerate() {
+            let d = dist(p);
+            if d <= radius {
+                assert!(kept.contains(&i), "point {i} at {d} from a centre was dropped");
+            }
+            // (Kept points lie in a centre's cell or a neighbouring one.)
+            if kept.contains(&i) {
+                assert!(d <= 2.0 * 1.01 * radius * 3f64.sqrt() + 1e-9, "point {i} at {d} was kept");
+            }
+        }
+        assert!(keep.len() < pts.len() / 10);
+        // Most of the points near: keep them all.
+        let all: Vec<bool> = (0..pts.len()).map(|i| i % 50 == 0).collect();
+        assert_eq!(near(&pts, &all, radius), None);
+    }
+}

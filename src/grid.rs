@@ -1,0 +1,46 @@
+//! Cells of a uniform grid: the one cell function every gridded structure uses (the tile
+//! store's sub-cells, the statistics pass's sample cells, a tile cloud's blocks), and a hash
+//! grid for sparse sets (the completion stage's ends and vertices).
+
+use glam::{DVec3, I64Vec3};
+use std::collections::HashMap;
+
+/// The cell of side `side` holding position `p` (cells are half-open, `[k side, (k+1) side)`).
+#[inline]
+pub fn cell(p: DVec3, side: f64) -> I64Vec3 {
+    (p / side).floor().as_i64vec3()
+}
+
+/// A uniform hash grid over positions: a query visits every cell a ball touches, so the cost
+/// of a lookup does not grow with the number of items.
+pub struct HashGrid<T> {
+    side: f64,
+    map: HashMap<I64Vec3, Vec<T>>,
+}
+
+impl<T: Copy> HashGrid<T> {
+    /// An empty grid of cells of side `side`.
+    pub fn new(side: f64) -> HashGrid<T> {
+        HashGrid { side: side.max(f64::MIN_POSITIVE), map: HashMap::new() }
+    }
+
+    /// Adds item `t` at `p`.
+    pub fn insert(&mut self, p: DVec3, t: T) {
+        self.map.entry(cell(p, self.side)).or_default().push(t);
+    }
+
+    /// Calls `f` for every item in the cells that the ball of radius `r` around `p` touches
+    /// (a superset of the items within `r`; callers test the distance).
+    pub fn near(&self, p: DVec3, r: f64, mut f: impl FnMut(T)) {
+        let (lo, hi) = (cell(p - DVec3::splat(r), self.side), cell(p + DVec3::splat(r), self.side));
+        for x in lo.x..=hi.x {
+            for y in lo.y..=hi.y {
+                for z in lo.z..=hi.z {
+                    if let Some(items) = self.map.get(&I64Vec3::new(x, y, z)) {
+                        items.iter().for_each(|&t| f(t));
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,74 @@
+//! Bucketing: one streaming pass over the inputs writes every point once, to its tile.
+
+use crate::cancel::Cancel;
+use crate::error::{Error, Result};
+use crate::io::{self, Filter, PointReader};
+use crate::points::PointChunk;
+use crate::progress::Bar;
+use crate::tiles::Bucketer;
+use glam::DVec3;
+use std::path::PathBuf;
+
+/// Where a run's points come from.
+pub enum Input<'a> {
+    /// Point files, read in order (file index `i` gives the global ids `i << 40 | record`).
+    Files(&'a [PathBuf], &'a Filter),
+    /// Points held in memory (global ids are their indices).
+    Points(&'a [DVec3]),
+}
+
+/// Streams every point of `input` into `b`, counting them on `bar`.
+pub fn bucket(input: &Input, b: &mut Bucketer, bar: &Bar, cancel: &Cancel) -> Result<()> {
+    match input {
+        Input::Points(points) => {
+            for (k, part) in points.chunks(io::DEFAULT_CHUNK).enumerate() {
+                let first = (k * io::DEFAULT_CHUNK) as u64;
+                let chunk = PointChunk { xyz: part.to_vec(), class: vec![0; part.len()], index: (first..first + part.len() as u64).collect() };
+                add(b, 0, &chunk, bar, cancel)?;
+            }
+            Ok(())
+        }
+        Input::Files(files, filter) => bucket_files(files, filter, b, bar, cancel),
+    }
+}
+
+fn add(b: &mut Bucketer, fi: usize, chunk: &PointChunk, bar: &Bar, cancel: &Cancel) -> Result<()> {
+    // Global ids: file index in the high bits, record index in the low 40 bits.
+    let gids: Vec<u64> = chunk.index.iter().map(|&i| ((fi as u64) << 40) | i).collect();
+    b.add(chunk, &gids)?;
+    bar.inc(chunk.len() as u64);
+    cancel.check()
+}
+
+/// The files are decoded on a thread of their own, one chunk ahead of the bucketing, so that
+/// decoding overlaps the sorting, compressing and writing of the tiles.
+fn bucket_files(files: &[PathBuf], filter: &Filter, b: &mut Bucketer, bar: &Bar, cancel: &Cancel) -> Result<()> {
+    let (tx, rx) = crossbeam_channel::bounded::<Result<(usize, PointChunk)>>(0);
+    std::thread::scope(|s| -> Result<()> {
+        // Owning the receiver here drops it on any early return, which stops the reader.
+        let rx = rx;
+        let reader = s.spawn(move || {
+            for (fi, f) in files.iter().enumerate() {
+                let mut r = match PointReader::open(f, filter) {
+                    Ok(r) => r,
+                    Err(e) => return drop(tx.send(Err(e))),
+                };
+                loop {
+                    let mut chunk = PointChunk::default();
+                    match r.read_chunk(io::DEFAULT_CHUNK, &mut chunk) {
+                        Ok(0) => break,
+                        Ok(_) if tx.send(Ok((fi, chunk))).is_ok() => {}
+                        Ok(_) => return,
+                        Err(e) => return drop(tx.send(Err(e))),
+                    }
+                }
+            }
+        });
+        for msg in rx.iter() {
+            let (fi, chunk) = msg?;
+            add(b, fi, &chunk, bar, cancel)?;
+        }
+        // (A reader that panicked ended the loop early: the points after it are missing.)
+        reader.join().map_err(|p| Error::panic("input reader", p))
+    })
+}

@@ -1,0 +1,140 @@
+//! The run directory's manifest: the job (inputs, parameters, version), the plan (the tile
+//! grid) and what is done. Re-running the same job continues it; a different job is refused.
+
+use crate::error::{io_input, Error, Result};
+use crate::extract::{Params, Resolved};
+use crate::keys::fnv1a;
+use crate::points::{CloudHeader, Crs};
+use crate::tiles::Grid;
+use crate::workspace::Workspace;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The manifest's name in a run directory.
+pub const NAME: &str = "manifest.json";
+
+/// How to run a job.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Job {
+    /// crease version.
+    pub version: String,
+    /// Input files with their stamps.
+    pub inputs: Vec<InputStamp>,
+    /// Method parameters as given.
+    pub params: Params,
+    /// Classes kept (all if None).
+    pub classes: Option<Vec<u8>>,
+    /// Keep withheld and noise points.
+    pub keep_noise: bool,
+    /// Tile edge length, if given.
+    pub tile_size: Option<f64>,
+    /// Memory budget in bytes.
+    pub memory: u64,
+}
+
+/// What identifies an input file's content.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct InputStamp {
+    /// Path as given.
+    pub path: PathBuf,
+    /// Size in bytes.
+    pub size: u64,
+    /// Modification time, nanoseconds since the epoch.
+    pub mtime_ns: i128,
+    /// FNV-1a hash of the first 64 KiB (header and VLRs).
+    pub header_hash: String,
+}
+
+/// State of a run directory.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Manifest {
+    /// The job.
+    pub job: Job,
+    /// Tile grid.
+    pub grid: Grid,
+    /// Points the headers declare.
+    pub declared_points: u64,
+    /// Diagonal of the inputs' union bounds.
+    pub diag: f64,
+    /// Bucketing finished.
+    pub bucketed: bool,
+    /// Points per tile after filtering.
+    pub tile_points: Vec<u64>,
+    /// Parameters resolved from the statistics pass.
+    pub resolved: Option<Resolved>,
+    /// Outputs written.
+    pub finished: bool,
+}
+
+/// The stamp of input file `path`: size, modification time, hash of the first 64 KiB.
+pub fn stamp(path: &Path) -> Result<InputStamp> {
+    use std::io::Read;
+    let meta = std::fs::metadata(path).map_err(|e| io_input(path, e))?;
+    let mtime_ns = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos() as i128);
+    let mut head = vec![0u8; 65536.min(meta.len() as usize)];
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut head)).map_err(|e| io_input(path, e))?;
+    // The path is made absolute (symbolic links kept) so that a resume from another working
+    // directory, or with the same file named relatively, is recognised as the same run.
+    let path = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    Ok(InputStamp { path, size: meta.len(), mtime_ns, header_hash: format!("{:016x}", fnv1a(&head)) })
+}
+
+/// One CRS for all inputs, or an error naming the file that disagrees.
+pub fn common_crs(headers: &[CloudHeader]) -> Result<Crs> {
+    let known: Vec<&CloudHeader> = headers.iter().filter(|h| !h.crs.is_unknown()).collect();
+    if let Some(first) = known.first() {
+        for h in &known[1..] {
+            if h.crs != first.crs {
+                return Err(Error::input(&h.path, format!("CRS {} differs from {} in {}", h.crs.summary(), first.crs.summary(), first.path.display())));
+            }
+        }
+        return Ok(first.crs.clone());
+    }
+    Ok(Crs::default())
+}
+
+/// Reads the manifest of a workspace, if there is one.
+pub fn read(ws: &Workspace) -> Result<Option<Manifest>> {
+    match ws.read(NAME)? {
+        Some(b) => serde_json::from_slice(&b).map(Some).map_err(|e| Error::Damaged { path: ws.path(NAME), what: "unreadable manifest".into(), source: Some(e.into()) }),
+        None => Ok(None),
+    }
+}
+
+/// Saves the manifest atomically.
+pub fn save(ws: &Workspace, m: &Manifest) -> Result<()> {
+    ws.write_atomic(NAME, serde_json::to_string_pretty(m).expect("manifest serialises").as_bytes())
+}
+
+/// Describes how two jobs differ, for the refusal message.
+pub fn job_difference(old: &Job, new: &Job) -> String {
+    if old.version != new.version {
+        return format!("crease version changed ({} -> {})", old.version, new.version);
+    }
+    if old.inputs.len() != new.inputs.len() {
+        return format!("the inputs changed ({} files -> {})", old.inputs.len(), new.inputs.len());
+    }
+    for (a, b) in old.inputs.iter().zip(&new.inputs) {
+        if a.path != b.path {
+            return format!("input {} is now {}", a.path.display(), b.path.display());
+        }
+        if a.size != b.size || a.header_hash != b.header_hash || a.mtime_ns != b.mtime_ns {
+            return format!("input {} changed since the run started (size, time or header)", a.path.display());
+        }
+    }
+    if old.params != new.params {
+        return "the method parameters changed".to_string();
+    }
+    if old.classes != new.classes || old.keep_noise != new.keep_noise {
+        return "the point filters changed".to_string();
+    }
+    if old.tile_size != new.tile_size || old.memory != new.memory {
+        return "the tiling (--tile-size or --memory) changed".to_string();
+    }
+    "the job changed".to_string()
+}
+

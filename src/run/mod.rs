@@ -1,0 +1,558 @@
+//! The pipeline: plan, bucket, statistics, residuals, projection, curves, write, over a
+//! workspace that is a resumable run directory ([`run_extract`]) or memory
+//! ([`extract_cloud`]). The stages' work is in [`crate::extract`]; this module only
+//! orchestrates: the manifest, the plan, bucketing, the tile pass engine, the record codec of
+//! the per-tile results, and status.
+//!
+//! Run directory layout:
+//! - `manifest.json`: the job (inputs with size, mtime and header checksum; parameters; crease
+//!   version), the plan (grid), and what is done;
+//! - `tiles/`: bucketed points; `stats/`, `resid/`, `edges/`: one result file per tile and pass,
+//!   each a record of the codec (see [`crate::codec`]);
+//! - `curves.obj`, `curves.ply`, `curves.geojson`, `report.json`: the outputs.
+//!
+//! Every file is written to a temporary name, synced and renamed, and only then counted as
+//! done, so a run killed at any moment resumes where it stopped and ends with the same curves.
+
+pub mod bucket;
+pub mod manifest;
+pub mod pass;
+pub mod plan;
+pub mod records;
+pub mod status;
+
+pub use bucket::Input;
+pub use manifest::{common_crs, InputStamp, Job, Manifest};
+pub use plan::{tile_size_for, BYTES_PER_POINT, MAX_TILE_POINTS};
+pub use status::{render_status, status, Status};
+
+use crate::cancel::Cancel;
+use crate::curves::{write_geojson, write_obj, write_ply, Polyline};
+use crate::debug::DebugDump;
+use crate::error::{Error, Result};
+use crate::extract::candidates::{self, ResidualSum};
+use crate::extract::polylines::{self, SmoothedEdges};
+use crate::extract::statistics::{self, StatsTile};
+use crate::extract::{project, Counts, Params, Resolved, Timings};
+use crate::io::{self, Filter};
+use crate::keys::{key_quantum, settle, snap_quantum};
+use crate::points::{Bounds, Crs, TilePoints};
+use crate::progress::Progress;
+use crate::tiles::{Bucketer, Grid, Store};
+use crate::workspace::Workspace;
+use glam::DVec3;
+use pass::{tile_pass, Loading, PassContext};
+use rayon::prelude::*;
+use records::{Edges, Record, Residuals, Stats};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options of a run beyond the method parameters.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// Memory budget in bytes.
+    pub memory: u64,
+    /// Tile edge length override.
+    pub tile_size: Option<f64>,
+    /// Start over even if the directory holds a different job.
+    pub force: bool,
+    /// Progress output.
+    pub progress: crate::progress::Mode,
+    /// Stops the run after the tile in hand (Ctrl-C, SIGTERM).
+    pub cancel: Cancel,
+    /// Where intermediate point sets are written, if anywhere.
+    pub debug: DebugDump,
+}
+
+impl Default for RunOptions {
+    /// Half of the machine's memory, tiles sized from it, quiet, not forced.
+    fn default() -> Self {
+        RunOptions {
+            memory: (crate::mem::total_memory() / 2).max(256 << 20),
+            tile_size: None,
+            force: false,
+            progress: crate::progress::Mode::Quiet,
+            cancel: Cancel::default(),
+            debug: DebugDump::default(),
+        }
+    }
+}
+
+/// What `report.json` holds.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// crease version.
+    pub version: String,
+    /// Input files.
+    pub inputs: Vec<PathBuf>,
+    /// Parameters with defaults resolved.
+    pub params: Resolved,
+    /// Residual threshold used.
+    pub tau: f64,
+    /// Counts per stage.
+    pub counts: Counts,
+    /// Seconds per stage.
+    pub seconds: Timings,
+    /// Seconds per pass of this invocation (bucketing, statistics, residuals, projection,
+    /// curves, writing); passes finished by an earlier invocation count 0.
+    pub pass_seconds: PassSeconds,
+    /// Total wall-clock seconds of this invocation.
+    pub total_seconds: f64,
+    /// Peak resident memory of this invocation, bytes.
+    pub peak_rss_bytes: u64,
+    /// Peak resident memory of this invocation up to the end of the tile passes, bytes (the
+    /// difference to `peak_rss_bytes` is what the curve stages added).
+    pub peak_rss_tiles_bytes: u64,
+    /// Worker threads.
+    pub threads: usize,
+    /// Tiles in the grid.
+    pub tiles: usize,
+    /// Tile edge length.
+    pub tile_size: f64,
+    /// Halo width.
+    pub halo: f64,
+    /// True if this invocation continued an interrupted run.
+    pub resumed: bool,
+}
+
+/// Seconds per pass.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PassSeconds {
+    /// Reading and bucketing the inputs.
+    pub bucketing: f64,
+    /// Spacing and noise statistics.
+    pub statistics: f64,
+    /// Stage 1 over all tiles.
+    pub residuals: f64,
+    /// Stage 2 over all tiles.
+    pub projection: f64,
+    /// Stages 3-5 on the edge cloud.
+    pub curves: f64,
+    /// Of the statistics pass, seconds the loader thread spent reading tiles and building
+    /// their k-d trees (overlapping the fits of the tile before).
+    pub statistics_load: f64,
+    /// The same for the residual pass.
+    pub residuals_load: f64,
+    /// The same for the projection pass.
+    pub projection_load: f64,
+    /// Writing outputs.
+    pub writing: f64,
+}
+
+/// The result of an in-memory extraction.
+#[derive(Clone, Debug)]
+pub struct Extraction {
+    /// Feature curves in world coordinates.
+    pub curves: Vec<Polyline>,
+    /// Parameters used.
+    pub params: Resolved,
+    /// tau used.
+    pub tau: f64,
+    /// Counts.
+    pub counts: Counts,
+    /// Timings.
+    pub seconds: Timings,
+}
+
+/// Runs (or resumes) extraction of `inputs` (files or directories) into the run directory
+/// `dir`, writing `curves.obj`, `curves.ply`, `curves.geojson` and `report.json` there.
+///
+/// ```no_run
+/// use crease::extract::Params;
+/// use crease::io::Filter;
+/// use crease::run::{run_extract, RunOptions};
+/// use std::path::{Path, PathBuf};
+///
+/// let report = run_extract(&[PathBuf::from("scan.laz")], Path::new("run"), &Params::default(), &Filter::default(), &RunOptions::default())?;
+/// println!("{} curves", report.counts.curves);
+/// # Ok::<(), crease::Error>(())
+/// ```
+pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts: &RunOptions) -> Result<Report> {
+    let t0 = Instant::now();
+    let files = io::expand_inputs(inputs)?;
+    let headers = files.iter().map(|f| io::read_header(f)).collect::<Result<Vec<_>>>()?;
+    let crs = common_crs(&headers)?;
+    let job = Job {
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        inputs: files.iter().map(|f| manifest::stamp(f)).collect::<Result<_>>()?,
+        params: params.clone(),
+        classes: filter.classes.clone(),
+        keep_noise: filter.keep_noise,
+        tile_size: opts.tile_size,
+        memory: opts.memory,
+    };
+    let ws = Workspace::disk(dir)?;
+    let bounds = || -> Result<(Bounds, u64)> {
+        let mut b = Bounds::EMPTY;
+        let mut declared = 0;
+        for h in &headers {
+            b.union(&if h.bounds.is_empty() { io::scan_bounds(&h.path)?.0 } else { h.bounds });
+            declared += h.count;
+        }
+        if b.is_empty() {
+            return Err(Error::input(&files[0], "no points"));
+        }
+        Ok((b, declared))
+    };
+    let (manifest, resumed) = plan(&ws, job, bounds, opts)?;
+    let mut run = Run::new(ws, manifest, opts);
+    let r = run.tile_passes(&Input::Files(&files, filter), params, &files[0])?;
+    let tau = run.tau;
+    let (curves, counts, seconds) = run.curves(&r)?;
+    run.write(&curves, &crs)?;
+    let report = run.report(files, r, tau, counts, seconds, t0, resumed);
+    run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
+    Ok(report)
+}
+
+/// Extracts feature curves from `points` (world coordinates) held in memory: the same pipeline
+/// as [`run_extract`], over a workspace in memory.
+///
+/// ```
+/// use crease::extract::Params;
+/// use crease::run::{extract_cloud, RunOptions};
+/// use crease::synth::{sample, shapes, SynthOptions};
+///
+/// let cube = shapes::shape("cube", 90.0).unwrap();
+/// let points = sample(&cube, &SynthOptions { n: 60_000, ..Default::default() });
+/// let x = extract_cloud(&points, &Params::default(), &RunOptions::default())?;
+/// assert_eq!(x.curves.len(), 12);
+/// # Ok::<(), crease::Error>(())
+/// ```
+pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Result<Extraction> {
+    let here = PathBuf::from("<memory>");
+    let job = Job { version: env!("CARGO_PKG_VERSION").to_string(), inputs: vec![], params: params.clone(), classes: None, keep_noise: true, tile_size: opts.tile_size, memory: opts.memory };
+    let bounds = || -> Result<(Bounds, u64)> {
+        let b = Bounds::of(points.iter().copied());
+        if b.is_empty() {
+            return Err(Error::input(&here, "no points"));
+        }
+        Ok((b, points.len() as u64))
+    };
+    let ws = Workspace::memory();
+    let (manifest, _) = plan(&ws, job, bounds, opts)?;
+    let mut run = Run::new(ws, manifest, opts);
+    let r = run.tile_passes(&Input::Points(points), params, &here)?;
+    let (curves, counts, seconds) = run.curves(&r)?;
+    Ok(Extraction { curves, params: r, tau: run.tau, counts, seconds })
+}
+
+/// The plan step: continues the job the workspace holds, or plans it anew (the tile grid over
+/// `bounds()`, sized from the budget), refusing a different job unless forced. Returns the
+/// manifest and whether the run resumes.
+fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions) -> Result<(Manifest, bool)> {
+    match manifest::read(ws)? {
+        Some(m) if m.job == job => return Ok((m, true)),
+        Some(m) if !opts.force => {
+            return Err(Error::Usage(format!("{}: holds a different run: {}; use --force to start over", ws.root().display(), manifest::job_difference(&m.job, &job))))
+        }
+        _ => {}
+    }
+    for name in [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "curves.obj", "curves.ply", "curves.geojson", "report.json"] {
+        ws.remove(name);
+    }
+    let (b, declared) = bounds()?;
+    let size = opts.tile_size.unwrap_or_else(|| tile_size_for(&b, declared, opts.memory));
+    let m = Manifest { job, grid: Grid::new(&b, size), declared_points: declared, diag: b.diagonal(), bucketed: false, tile_points: vec![], resolved: None, finished: false };
+    manifest::save(ws, &m)?;
+    Ok((m, false))
+}
+
+/// A run in progress: its workspace, manifest and options, and what the steps found so far.
+struct Run<'a> {
+    ws: Workspace,
+    manifest: Manifest,
+    opts: &'a RunOptions,
+    progress: Progress,
+    pass: PassSeconds,
+    /// Tiles that hold points.
+    tiles: Vec<u32>,
+    /// Quantum of the position keys.
+    kq: f64,
+    /// The residual threshold.
+    tau: f64,
+    /// Points whose residuals tau averages.
+    points: u64,
+    /// Peak memory by the end of the tile passes.
+    peak_rss_tiles: u64,
+}
+
+impl<'a> Run<'a> {
+    fn new(ws: Workspace, manifest: Manifest, opts: &'a RunOptions) -> Run<'a> {
+        let kq = key_quantum(manifest.diag);
+        let progress = Progress::new(opts.progress);
+        Run { ws, manifest, opts, progress, pass: PassSeconds::default(), tiles: vec![], kq, tau: 0.0, points: 0, peak_rss_tiles: 0 }
+    }
+
+    fn context(&self) -> PassContext<'_> {
+        PassContext { ws: &self.ws, progress: &self.progress, cancel: &self.opts.cancel }
+    }
+
+    /// Bucketing, statistics, residuals and projection: the steps that run tile by tile.
+    /// Returns the resolved parameters; tau is kept.
+    fn tile_passes(&mut self, input: &Input, params: &Params, first_input: &Path) -> Result<Resolved> {
+        self.bucket(input)?;
+        let total: u64 = self.manifest.tile_points.iter().sum();
+        if total < 10 {
+            return Err(Error::input(first_input, format!("only {total} points after filtering: nothing to extract")));
+        }
+        self.tiles = (0..self.manifest.grid.len() as u32).filter(|&t| self.manifest.tile_points[t as usize] > 0).collect();
+        let r = self.statistics(params)?;
+        self.tau = self.residuals(&r, params)?;
+        self.projection(&r)?;
+        self.peak_rss_tiles = crate::mem::peak_rss();
+        Ok(r)
+    }
+
+    /// Bucketing: all or nothing (a partial store is discarded on resume).
+    fn bucket(&mut self, input: &Input) -> Result<()> {
+        if self.manifest.bucketed {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let store = Store::new(&self.ws)?;
+        store.clear()?;
+        let mut b = Bucketer::new(&self.manifest.grid, store, (self.opts.memory / 4 / 48) as usize);
+        let bar = self.progress.bar("bucketing", self.manifest.declared_points, "points");
+        bucket::bucket(input, &mut b, &bar, &self.opts.cancel)?;
+        b.flush()?;
+        store.sync()?;
+        bar.finish();
+        self.manifest.tile_points = b.counts.clone();
+        self.manifest.bucketed = true;
+        manifest::save(&self.ws, &self.manifest)?;
+        self.pass.bucketing = t.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Statistics pass: spacing, noise and density at sampled points, with a halo wide enough
+    /// for the 16-kappa noise fit (kappa from a probe of the fullest tile); then the
+    /// parameters are resolved from them.
+    fn statistics(&mut self, params: &Params) -> Result<Resolved> {
+        let t = Instant::now();
+        if let Some(r) = &self.manifest.resolved {
+            self.pass.statistics = t.elapsed().as_secs_f64();
+            return Ok(r.clone());
+        }
+        let (store, grid) = (Store::new(&self.ws)?, &self.manifest.grid);
+        let tile_points = &self.manifest.tile_points;
+        let fullest = *self.tiles.iter().max_by_key(|&&t| (tile_points[t as usize], std::cmp::Reverse(t))).expect("a tile with points");
+        let mut probe = TilePoints::default();
+        store.read(fullest, &mut probe, |_, _| true)?;
+        let kappa0 = crate::spacing::spacing(&probe.xyz, 2000);
+        drop(probe);
+        let total: u64 = tile_points.iter().sum();
+        let seed = params.seed.unwrap_or(1);
+        let loading = |halo| Loading { halo, keep: 1.0, seed, key_quantum: self.kq };
+        let halo0 = 24.0 * kappa0;
+        // (The pool has little to do here but wait for the next tile, so the tile is indexed
+        // on the pool, not on the loader thread as in the passes below.)
+        let time = tile_pass(
+            &self.context(),
+            "statistics",
+            &self.tiles,
+            |t, _| pass::load(store, grid, t, &loading(halo0)),
+            |t, first| {
+                let tile = StatsTile { core: grid.core(t), halo: halo0, key_quantum: self.kq, total, seed };
+                statistics::tile_statistics(first, &tile, |halo| pass::load(store, grid, t, &loading(halo))).map(Stats)
+            },
+        )?;
+        self.pass.statistics_load = time.load;
+        let mut stats = vec![];
+        for &t in &self.tiles {
+            stats.extend(records::read::<Stats>(&self.ws, t)?.0);
+        }
+        let r = crate::extract::params::resolve(params, &stats);
+        self.manifest.resolved = Some(r.clone());
+        manifest::save(&self.ws, &self.manifest)?;
+        self.pass.statistics = t.elapsed().as_secs_f64();
+        Ok(r)
+    }
+
+    /// How the residual and projection passes load a tile: the same way in both, so that the
+    /// residuals come back in the cloud's order.
+    fn cloud_loading(&self, r: &Resolved) -> Loading {
+        Loading { halo: r.halo(), keep: r.keep, seed: r.seed, key_quantum: self.kq }
+    }
+
+    /// Residual pass (stage 1); returns tau, the mean residual over all points (an exact sum:
+    /// the same whatever the tiling), unless the user gave it.
+    fn residuals(&mut self, r: &Resolved, params: &Params) -> Result<f64> {
+        let t = Instant::now();
+        let (store, grid, loading) = (Store::new(&self.ws)?, &self.manifest.grid, self.cloud_loading(r));
+        let time = tile_pass(
+            &self.context(),
+            "residuals",
+            &self.tiles,
+            |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle),
+            |_, (cloud, core)| Ok(Residuals(candidates::tile_residuals(&cloud, &core, r))),
+        )?;
+        self.pass.residuals_load = time.load;
+        // (Read on the pool, which is idle here.)
+        let sums: Vec<ResidualSum> = self.tiles.par_iter().map(|&t| Ok(ResidualSum::of(records::read::<Residuals>(&self.ws, t)?.0.residual.iter().map(|x| x.value)))).collect::<Result<_>>()?;
+        let total = sums.into_iter().fold(ResidualSum::default(), |a, b| a + b);
+        self.points = total.count();
+        self.pass.residuals = t.elapsed().as_secs_f64();
+        Ok(params.tau.unwrap_or(settle(total.mean())))
+    }
+
+    /// Projection pass (stage 2): the candidates of each tile, projected.
+    fn projection(&mut self, r: &Resolved) -> Result<()> {
+        let t = Instant::now();
+        let (store, grid, loading, tau) = (Store::new(&self.ws)?, &self.manifest.grid, self.cloud_loading(r), self.tau);
+        let debug = &self.opts.debug;
+        let time = tile_pass(
+            &self.context(),
+            "projection",
+            &self.tiles,
+            |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle),
+            |t, (cloud, core)| {
+                let res = records::read::<Residuals>(&self.ws, t)?.0;
+                let cand = candidates::tile_candidates(&cloud, &core, &res, tau);
+                if debug.on() {
+                    let pts: Vec<DVec3> = cand.iter().map(|&i| cloud.at(i as usize)).collect();
+                    debug.points(&format!("candidates_{t}.obj"), &pts, cloud.origin);
+                }
+                Ok(Edges(project::tile_edges(&cloud, &cand, r)))
+            },
+        )?;
+        self.pass.projection_load = time.load;
+        self.pass.projection = t.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// A tile's edge points, snapped, with its corners and counts.
+    fn tile_edges(&self, t: u32, q: f64) -> Result<crate::extract::TileEdges> {
+        let mut e = records::read::<Edges>(&self.ws, t)?.0;
+        for x in e.edges.iter_mut() {
+            polylines::snap_edge(x, q);
+        }
+        Ok(e)
+    }
+
+    /// Curve stages. Stage 3 (smoothing) is local: each tile's edge points are smoothed with
+    /// the edge points of the neighbouring tiles within the smoothing reach as context, so
+    /// only a few tiles' edge points are held at a time. Stages 4-5 run on the whole smoothed
+    /// edge cloud (positions and normals, 48 bytes a point).
+    fn curves(&mut self, r: &Resolved) -> Result<(Vec<Polyline>, Counts, Timings)> {
+        let t = Instant::now();
+        crate::mem::release_free_memory();
+        let q = snap_quantum(r.kappa);
+        // Bounds of each tile's edge points, and all corner points.
+        let mut counts = Counts { points: self.points, ..Default::default() };
+        let mut boxes: Vec<(u32, DVec3, DVec3)> = vec![];
+        let mut corners = vec![];
+        for &t in &self.tiles {
+            let e = self.tile_edges(t, q)?;
+            counts.candidates += e.candidates;
+            counts.one_surface += e.one_surface;
+            counts.edge_points += e.edges.len() as u64;
+            counts.corner_points += e.corners.len() as u64;
+            corners.extend(e.corners);
+            if let Some(lo) = e.edges.iter().map(|x| x.p).reduce(DVec3::min) {
+                boxes.push((t, lo, e.edges.iter().map(|x| x.p).reduce(DVec3::max).unwrap()));
+            }
+        }
+        let origin = boxes.iter().map(|b| b.1).reduce(DVec3::min).unwrap_or(DVec3::ZERO);
+        let grouped = polylines::group_corners(corners, origin, r);
+        counts.corners = grouped.len() as u64;
+        let smoothed = self.smooth(&boxes, origin, &grouped, r, counts.edge_points as usize)?;
+        counts.unconfirmed = smoothed.unconfirmed;
+        let mut seconds = Timings { candidates: self.pass.residuals, projection: self.pass.projection, index: self.pass.statistics, smoothing: t.elapsed().as_secs_f64(), ..Default::default() };
+        let traced = polylines::grow_and_complete(smoothed, &grouped, origin, r, &self.opts.debug);
+        (counts.grown, counts.curves) = (traced.grown, traced.curves.len() as u64);
+        (seconds.growing, seconds.completion) = (traced.growing_seconds, traced.completion_seconds);
+        self.pass.curves = t.elapsed().as_secs_f64();
+        Ok((traced.curves, counts, seconds))
+    }
+
+    /// Stage 3 and the consensus filter, tile by tile (`boxes`: each tile's edge point bounds),
+    /// positions relative to `origin`.
+    fn smooth(&self, boxes: &[(u32, DVec3, DVec3)], origin: DVec3, grouped: &[DVec3], r: &Resolved, edge_points: usize) -> Result<SmoothedEdges> {
+        let q = snap_quantum(r.kappa);
+        // (The margin covers the f32 rounding of the k-d tree's distances.)
+        let reach = polylines::smoothing_reach(r) * 1.001 + 4.0 * q;
+        let mut debug_edges = vec![];
+        let mut out = SmoothedEdges { points: Vec::with_capacity(edge_points), normals: Vec::with_capacity(edge_points), unconfirmed: 0 };
+        let bar = self.progress.bar("smoothing", boxes.len() as u64, "tiles");
+        for &(t, lo, hi) in boxes {
+            let (lo, hi) = (lo - DVec3::splat(reach), hi + DVec3::splat(reach));
+            let inside = |p: DVec3| p.cmpge(lo).all() && p.cmple(hi).all();
+            // (Decoded on the pool, which waits for them: the tile's edge points, and those of
+            // its neighbours within reach, in order.)
+            let (own, context) = rayon::join(
+                || self.tile_edges(t, q),
+                || {
+                    let near: Vec<u32> = boxes.iter().filter(|&&(u, ulo, uhi)| u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all()).map(|b| b.0).collect();
+                    near.par_iter().map(|&u| Ok(self.tile_edges(u, q)?.edges.into_iter().filter(|e| inside(e.p)).collect::<Vec<_>>())).collect::<Result<Vec<_>>>()
+                },
+            );
+            let (own, context) = (own?.edges, context?);
+            let size = own.len() + context.iter().map(Vec::len).sum::<usize>();
+            let (mut block, mut block_normals) = (Vec::with_capacity(size), Vec::with_capacity(size));
+            for e in own.iter().chain(context.iter().flatten()) {
+                block.push(e.p - origin);
+                block_normals.push(e.n);
+            }
+            if self.opts.debug.on() {
+                debug_edges.extend_from_slice(&block[..own.len()]);
+            }
+            polylines::smooth_and_confirm(&block, &block_normals, own.len(), grouped, r, &mut out);
+            bar.inc(1);
+            self.opts.cancel.check()?;
+        }
+        bar.finish();
+        self.opts.debug.points("edges.obj", &debug_edges, origin);
+        Ok(out)
+    }
+
+    /// The write step: the outputs, then the manifest marked finished.
+    fn write(&mut self, curves: &[Polyline], crs: &Crs) -> Result<()> {
+        let t = Instant::now();
+        write_outputs(self.ws.root(), curves, crs)?;
+        self.manifest.finished = true;
+        manifest::save(&self.ws, &self.manifest)?;
+        self.pass.writing = t.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn report(&self, inputs: Vec<PathBuf>, r: Resolved, tau: f64, counts: Counts, seconds: Timings, t0: Instant, resumed: bool) -> Report {
+        let grid = &self.manifest.grid;
+        Report {
+            version: env!("CARGO_PKG_VERSION").to_string(),
+            inputs,
+            halo: r.halo(),
+            params: r,
+            tau,
+            counts,
+            seconds,
+            pass_seconds: self.pass.clone(),
+            total_seconds: t0.elapsed().as_secs_f64(),
+            peak_rss_bytes: crate::mem::peak_rss(),
+            peak_rss_tiles_bytes: self.peak_rss_tiles,
+            threads: rayon::current_num_threads(),
+            tiles: grid.len(),
+            tile_size: grid.size,
+            resumed,
+        }
+    }
+}
+
+fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs) -> Result<()> {
+    // Each output goes to a temporary name first, then is renamed into place.
+    let tmp = dir.join("out.tmp");
+    std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
+    write_obj(&tmp.join("curves.obj"), curves)?;
+    write_ply(&tmp.join("curves.ply"), curves)?;
+    write_geojson(&tmp.join("curves.geojson"), curves, crs)?;
+    for f in ["curves.obj", "curves.ply", "curves.geojson"] {
+        let p = tmp.join(f);
+        std::fs::File::open(&p).and_then(|f| f.sync_all()).map_err(|e| Error::output(&p, e))?;
+        std::fs::rename(&p, dir.join(f)).map_err(|e| Error::output(&p, e))?;
+    }
+    let _ = std::fs::remove_dir(&tmp);
+    Ok(())
+}
+

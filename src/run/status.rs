@@ -1,0 +1,61 @@
+//! `crease status`: what a run directory has done and what is left.
+
+use super::manifest;
+use super::records::{Edges, Record, Residuals, Stats};
+use crate::error::{Error, Result};
+use crate::workspace::Workspace;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// What `crease status` reports.
+#[derive(Clone, Debug, Serialize)]
+pub struct Status {
+    /// Run directory.
+    pub dir: PathBuf,
+    /// Inputs.
+    pub inputs: Vec<PathBuf>,
+    /// Tiles with points.
+    pub tiles: usize,
+    /// Bucketing done.
+    pub bucketed: bool,
+    /// Tiles done per pass: statistics, residuals, projection.
+    pub passes: Vec<(String, usize)>,
+    /// Outputs written.
+    pub finished: bool,
+    /// One-line summary.
+    pub summary: String,
+}
+
+/// Reads what a run directory has done.
+pub fn status(dir: &Path) -> Result<Status> {
+    if !dir.is_dir() {
+        return Err(Error::input(dir, "not a crease run directory (no such directory)"));
+    }
+    let ws = Workspace::disk(dir)?;
+    let m = manifest::read(&ws)?.ok_or_else(|| Error::input(dir, "not a crease run directory (no manifest.json)"))?;
+    let tiles: Vec<u32> = (0..m.tile_points.len() as u32).filter(|&t| m.tile_points[t as usize] > 0).collect();
+    let done = |dir: &str| tiles.iter().filter(|&&t| ws.exists(&super::records::name(dir, t))).count();
+    let passes: Vec<(String, usize)> = [("statistics", Stats::DIR), ("residuals", Residuals::DIR), ("projection", Edges::DIR)].iter().map(|(n, d)| (n.to_string(), done(d))).collect();
+    let summary = if m.finished {
+        "finished".to_string()
+    } else if !m.bucketed {
+        "bucketing not finished (it restarts from the beginning)".to_string()
+    } else {
+        match passes.iter().find(|p| p.1 < tiles.len()) {
+            Some((name, n)) => format!("in {name}: {n} of {} tiles done", tiles.len()),
+            None => "curves and outputs left to do".to_string(),
+        }
+    };
+    Ok(Status { dir: dir.to_path_buf(), inputs: m.job.inputs.iter().map(|i| i.path.clone()).collect(), tiles: tiles.len(), bucketed: m.bucketed, passes, finished: m.finished, summary })
+}
+
+/// Formats a status for humans.
+pub fn render_status(s: &Status) -> String {
+    let mut out = format!("{}: {}\n  inputs     {}\n  tiles      {}\n  bucketed   {}\n", s.dir.display(), s.summary, s.inputs.len(), s.tiles, if s.bucketed { "yes" } else { "no" });
+    for (name, n) in &s.passes {
+        out += &format!("  {name:<10} {n}/{}\n", s.tiles);
+    }
+    out += &format!("  outputs    {}\n", if s.finished { "written" } else { "not yet" });
+    out
+}
+

@@ -1,0 +1,206 @@
+//! Where a run keeps its files: a run directory on disk, or memory for the in-memory API.
+//!
+//! The pipeline reads and writes its working files (tile stores, per-tile results, the
+//! manifest) only through a [`Workspace`], by names relative to it, so the same code runs over
+//! a resumable run directory and over a cloud held in memory.
+
+use crate::error::{io_input, Error, Result};
+use std::collections::HashMap;
+use std::io::{BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// A run directory on disk, or its stand-in in memory.
+pub struct Workspace {
+    root: PathBuf,
+    /// The files, when in memory.
+    memory: Option<Mutex<HashMap<String, Arc<Vec<u8>>>>>,
+}
+
+impl Workspace {
+    /// The run directory `dir` (created if needed).
+    pub fn disk(dir: &Path) -> Result<Workspace> {
+        std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+        Ok(Workspace { root: dir.to_path_buf(), memory: None })
+    }
+
+    /// A workspace that keeps its files in memory.
+    pub fn memory() -> Workspace {
+        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())) }
+    }
+
+    /// True if the files are kept in memory.
+    pub fn in_memory(&self) -> bool {
+        self.memory.is_some()
+    }
+
+    /// The root directory.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// The path of `name` (for messages, and for files only disk runs write).
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.root.join(name)
+    }
+
+    fn files(&self) -> Option<std::sync::MutexGuard<'_, HashMap<String, Arc<Vec<u8>>>>> {
+        self.memory.as_ref().map(|m| m.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// Creates the directory `name`.
+    pub fn create_dir(&self, name: &str) -> Result<()> {
+        if self.memory.is_some() {
+            return Ok(());
+        }
+        let p = self.path(name);
+        std::fs::create_dir_all(&p).map_err(|e| Error::output(&p, e))
+    }
+
+    /// Removes the file or directory `name`, if there is one.
+    pub fn remove(&self, name: &str) {
+        if let Some(mut files) = self.files() {
+            let dir = format!("{name}/");
+            files.retain(|k, _| k != name && !k.starts_with(&dir));
+            return;
+        }
+        let p = self.path(name);
+        let _ = if p.is_dir() { std::fs::remove_dir_all(&p) } else { std::fs::remove_file(&p) };
+    }
+
+    /// True if the file `name` exists.
+    pub fn exists(&self, name: &str) -> bool {
+        match self.files() {
+            Some(files) => files.contains_key(name),
+            None => self.path(name).exists(),
+        }
+    }
+
+    /// The bytes of file `name`, or None if there is no such file.
+    pub fn read(&self, name: &str) -> Result<Option<Vec<u8>>> {
+        if let Some(files) = self.files() {
+            return Ok(files.get(name).map(|b| b.to_vec()));
+        }
+        let p = self.path(name);
+        match std::fs::read(&p) {
+            Ok(b) => Ok(Some(b)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(io_input(&p, e)),
+        }
+    }
+
+    /// Writes file `name` atomically: temporary file, fsync, rename, fsync of the directory.
+    pub fn write_atomic(&self, name: &str, bytes: &[u8]) -> Result<()> {
+        match self.files() {
+            Some(mut files) => {
+                files.insert(name.to_string(), Arc::new(bytes.to_vec()));
+                Ok(())
+            }
+            None => write_atomic(&self.path(name), bytes),
+        }
+    }
+
+    /// Appends `bytes` to file `name` (created if need be).
+    pub fn append(&self, name: &str, bytes: &[u8]) -> Result<()> {
+        if let Some(mut files) = self.files() {
+            Arc::make_mut(files.entry(name.to_string()).or_default()).extend_from_slice(bytes);
+            return Ok(());
+        }
+        use std::io::Write;
+        let p = self.path(name);
+        let r = std::fs::OpenOptions::new().create(true).append(true).open(&p).and_then(|mut f| f.write_all(bytes));
+        r.map_err(|e| Error::output(&p, e))
+    }
+
+    /// Makes every file of directory `name` durable.
+    pub fn sync_dir(&self, name: &str) -> Result<()> {
+        if self.memory.is_some() {
+            return Ok(());
+        }
+        let dir = self.path(name);
+        for e in std::fs::read_dir(&dir).map_err(|e| Error::output(&dir, e))?.flatten() {
+            std::fs::File::open(e.path()).and_then(|f| f.sync_all()).map_err(|err| Error::output(e.path(), err))?;
+        }
+        Ok(())
+    }
+
+    /// A stream over file `name`, or None if there is no such file.
+    pub fn open(&self, name: &str) -> Result<Option<Source>> {
+        if let Some(files) = self.files() {
+            return Ok(files.get(name).map(|b| Source::Memory(b.clone(), 0)));
+        }
+        let p = self.path(name);
+        match std::fs::File::open(&p) {
+            Ok(f) => Ok(Some(Source::File(BufReader::new(f)))),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(io_input(&p, e)),
+        }
+    }
+}
+
+/// A file being read front to back, with skips.
+pub enum Source {
+    /// A file on disk.
+    File(BufReader<std::fs::File>),
+    /// A file in memory and the read position.
+    Memory(Arc<Vec<u8>>, usize),
+}
+
+impl Source {
+    /// Fills `buf`; false at the end of the file (nothing read).
+    pub fn read_exact_or_end(&mut self, buf: &mut [u8]) -> std::io::Result<bool> {
+        match self {
+            Source::File(f) => match f.read_exact(buf) {
+                Ok(()) => Ok(true),
+                Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => Ok(false),
+                Err(e) => Err(e),
+            },
+            Source::Memory(b, at) => {
+                if *at >= b.len() {
+                    return Ok(false);
+                }
+                let end = at.checked_add(buf.len()).filter(|&e| e <= b.len()).ok_or(std::io::ErrorKind::UnexpectedEof)?;
+                buf.copy_from_slice(&b[*at..end]);
+                *at = end;
+                Ok(true)
+            }
+        }
+    }
+
+    /// Fills `buf`, which must be there.
+    pub fn read_exact(&mut self, buf: &mut [u8]) -> std::io::Result<()> {
+        if self.read_exact_or_end(buf)? || buf.is_empty() {
+            Ok(())
+        } else {
+            Err(std::io::ErrorKind::UnexpectedEof.into())
+        }
+    }
+
+    /// Skips `n` bytes.
+    pub fn skip(&mut self, n: usize) -> std::io::Result<()> {
+        match self {
+            Source::File(f) => f.seek_relative(n as i64),
+            Source::Memory(b, at) => {
+                *at = at.saturating_add(n).min(b.len() + 1);
+                Ok(())
+            }
+        }
+    }
+}
+
+/// Writes `bytes` to `path` atomically: temporary file, fsync, rename, fsync of the directory.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let tmp = path.with_extension("tmp");
+    let r = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)?;
+        if let Some(dir) = path.parent() {
+            std::fs::File::open(dir)?.sync_all()?;
+        }
+        Ok(())
+    })();
+    r.map_err(|e| Error::output(path, e))
+}
