@@ -70,7 +70,11 @@ impl FrameHeader {
         if h.finalize() != self.crc {
             return Err(Error::damaged(path, "checksum mismatch"));
         }
-        let raw = zstd::bulk::decompress(zstd, self.raw_len).map_err(|e| Error::Damaged { path: path.to_path_buf(), what: "undecodable payload".into(), source: Some(e.into()) })?;
+        let raw = zstd::bulk::decompress(zstd, self.raw_len).map_err(|e| Error::Damaged {
+            path: path.to_path_buf(),
+            what: "undecodable payload".into(),
+            source: Some(e.into()),
+        })?;
         if raw.len() != self.raw_len {
             return Err(Error::damaged(path, "payload shorter than its header says"));
         }

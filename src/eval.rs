@@ -9,8 +9,8 @@
 //! - Chamfer distance: the average of the two directed mean distances; Hausdorff: the larger of
 //!   the two directed maximum distances. All distances are reported in dB units.
 
-use crate::points::Bounds;
 use crate::curves::Polyline;
+use crate::points::Bounds;
 use crate::spatial::Index;
 use glam::DVec3;
 use serde::Serialize;

@@ -1,8 +1,8 @@
 //! `crease info`: what each input file holds, from its header plus a small sample of points.
 
-use crate::points::{Bounds, CloudHeader, FileFormat, PointChunk};
 use crate::error::Result;
 use crate::io::{Filter, PointReader};
+use crate::points::{Bounds, CloudHeader, FileFormat, PointChunk};
 use glam::DVec3;
 use serde::Serialize;
 use std::fmt::Write as _;

@@ -330,49 +330,8 @@ fn run(cli: Cli) -> Result<(), Error> {
         }
         Cmd::Synth { what } => synth_cmd(what)?,
         Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir } => {
-            if let Some(n) = threads {
-                rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
-            }
-            if let Some(t) = tile_size {
-                if !(t > 0.0 && t.is_finite()) {
-                    return Err(Error::Usage("--tile-size must be a positive number".into()));
-                }
-            }
-            let cancel = crease::cancel::Cancel::default();
-            let _ = ctrlc::set_handler({
-                let cancel = cancel.clone();
-                move || cancel.set()
-            });
-            let defaults = crease::run::RunOptions::default();
-            let opts = crease::run::RunOptions {
-                memory: memory.unwrap_or(defaults.memory),
-                tile_size,
-                force,
-                progress: if quiet { crease::progress::Mode::Quiet } else { crease::progress::Mode::Auto },
-                cancel,
-                debug: crease::debug::DebugDump::new(debug_dir.or_else(|| std::env::var_os("CREASE_DEBUG_DIR").map(PathBuf::from))),
-            };
-            let params = params.params()?;
-            let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {
-                crease::io::expand_inputs(&paths)?
-                    .into_iter()
-                    .map(|f| {
-                        let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-                        (vec![f], out.join(stem))
-                    })
-                    .collect()
-            } else {
-                vec![(paths, out)]
-            };
-            for (inputs, dir) in jobs {
-                let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter(), &opts)?;
-                if !quiet {
-                    eprintln!(
-                        "{} curves from {} points in {:.2} s ({} tiles{}; kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
-                        r.counts.curves, r.counts.points, r.total_seconds, r.tiles, if r.resumed { ", resumed" } else { "" }, r.params.kappa, r.tau, r.counts.candidates, r.counts.edge_points, r.counts.corners, dir.display()
-                    );
-                }
-            }
+            let args = ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir };
+            extract_cmd(args)?
         }
         Cmd::Status { dir, json } => {
             let s = crease::run::status(&dir)?;
@@ -386,13 +345,85 @@ fn run(cli: Cli) -> Result<(), Error> {
     Ok(())
 }
 
+/// The arguments of `crease extract`.
+struct ExtractArgs {
+    paths: Vec<PathBuf>,
+    out: PathBuf,
+    filter: FilterArgs,
+    params: ParamArgs,
+    threads: Option<usize>,
+    memory: Option<u64>,
+    tile_size: Option<f64>,
+    force: bool,
+    per_file: bool,
+    quiet: bool,
+    debug_dir: Option<PathBuf>,
+}
+
+fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
+    let ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir } = a;
+    if let Some(n) = threads {
+        rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
+    }
+    if let Some(t) = tile_size {
+        if !(t > 0.0 && t.is_finite()) {
+            return Err(Error::Usage("--tile-size must be a positive number".into()));
+        }
+    }
+    let cancel = crease::cancel::Cancel::default();
+    let _ = ctrlc::set_handler({
+        let cancel = cancel.clone();
+        move || cancel.set()
+    });
+    let defaults = crease::run::RunOptions::default();
+    let opts = crease::run::RunOptions {
+        memory: memory.unwrap_or(defaults.memory),
+        tile_size,
+        force,
+        progress: if quiet { crease::progress::Mode::Quiet } else { crease::progress::Mode::Auto },
+        cancel,
+        debug: crease::debug::DebugDump::new(debug_dir.or_else(|| std::env::var_os("CREASE_DEBUG_DIR").map(PathBuf::from))),
+    };
+    let params = params.params()?;
+    let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {
+        crease::io::expand_inputs(&paths)?
+            .into_iter()
+            .map(|f| {
+                let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                (vec![f], out.join(stem))
+            })
+            .collect()
+    } else {
+        vec![(paths, out)]
+    };
+    for (inputs, dir) in jobs {
+        let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter(), &opts)?;
+        if !quiet {
+            eprintln!(
+                "{} curves from {} points in {:.2} s ({} tiles{}; kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
+                r.counts.curves,
+                r.counts.points,
+                r.total_seconds,
+                r.tiles,
+                if r.resumed { ", resumed" } else { "" },
+                r.params.kappa,
+                r.tau,
+                r.counts.candidates,
+                r.counts.edge_points,
+                r.counts.corners,
+                dir.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 fn synth_cmd(what: SynthCmd) -> Result<(), Error> {
     let t = Instant::now();
     let (out, n) = match what {
         SynthCmd::Shape { name, angle, sample } => {
-            let shape = synth::shapes::shape(&name, angle).ok_or_else(|| {
-                Error::Usage(format!("unknown shape '{name}' (one of: {})", synth::shapes::SHAPES.join(", ")))
-            })?;
+            let shape = synth::shapes::shape(&name, angle)
+                .ok_or_else(|| Error::Usage(format!("unknown shape '{name}' (one of: {})", synth::shapes::SHAPES.join(", "))))?;
             let n = synth::write_sampled(&shape, &sample.options()?, &sample.o)?;
             (sample.o, n as u64)
         }

@@ -33,11 +33,7 @@ impl Index {
     /// in no particular order.
     #[inline]
     pub fn within(&self, q: &[f32; 3], radius: f32, out: &mut Vec<(u32, f32)>) {
-        self.tree
-            .query(q)
-            .within::<SquaredEuclidean<f32>>(radius * radius)
-            .unsorted()
-            .visit(|r| out.push((r.item, r.distance)));
+        self.tree.query(q).within::<SquaredEuclidean<f32>>(radius * radius).unsorted().visit(|r| out.push((r.item, r.distance)));
     }
 
     /// Index and squared distance of the `k` points nearest to `q`, nearest first.

@@ -5,13 +5,13 @@
 //! processed, from the neighbouring tiles' stores, so the halo width can be chosen after the
 //! cloud's spacing and noise are known.
 
+use crate::codec;
+use crate::error::{Error, Result};
 pub use crate::points::TilePoints;
 use crate::points::{Bounds, PointChunk};
-use crate::error::{Error, Result};
+use crate::workspace::Workspace;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
-use crate::codec;
-use crate::workspace::Workspace;
 use std::path::Path;
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
@@ -104,7 +104,6 @@ impl Grid {
 pub fn within(b: &Bounds, halo: f64, p: DVec3) -> bool {
     (0..3).all(|a| p[a] >= b.min[a] - halo && p[a] < b.max[a] + halo)
 }
-
 
 /// The tile store: each tile's points, as frames of the record codec (see [`crate::codec`])
 /// appended to `tiles/<tile>.pts` in the run's workspace. A frame's metadata is its point count
@@ -278,7 +277,8 @@ impl<'a> Bucketer<'a> {
     /// Writes every buffer out.
     pub fn flush(&mut self) -> Result<()> {
         use rayon::prelude::*;
-        let tiles: Vec<(u32, TilePoints)> = self.buffers.iter_mut().enumerate().filter(|(_, b)| !b.xyz.is_empty()).map(|(t, b)| (t as u32, std::mem::take(b))).collect();
+        let tiles: Vec<(u32, TilePoints)> =
+            self.buffers.iter_mut().enumerate().filter(|(_, b)| !b.xyz.is_empty()).map(|(t, b)| (t as u32, std::mem::take(b))).collect();
         let sub = self.grid.size / SUB_CELLS;
         let o = DVec3::from(self.grid.origin);
         // Tiles are separate files: they are sorted, compressed and written in parallel.

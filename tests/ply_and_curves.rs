@@ -1,8 +1,8 @@
 //! PLY point input in every encoding, and curve output round trips.
 
-use crease::points::PointChunk;
 use crease::curves::{read_obj, read_ply, write_geojson, write_obj, write_ply, Polyline, Vertex};
 use crease::io::{Filter, PointReader};
+use crease::points::PointChunk;
 use glam::{DVec3, Vec3};
 use std::path::Path;
 

@@ -2,7 +2,7 @@
 
 mod common;
 
-use crease::io::{read_header, scan_bounds, PointReader, Filter};
+use crease::io::{read_header, scan_bounds, Filter, PointReader};
 use std::path::PathBuf;
 
 fn real_dir() -> Option<PathBuf> {

@@ -32,7 +32,11 @@ fn noise_model_bounds_displacement() {
         let q = p.clamp(DVec3::ZERO, DVec3::ONE);
         let outside = p.distance(q);
         let inside = [p.x, 1.0 - p.x, p.y, 1.0 - p.y, p.z, 1.0 - p.z].into_iter().fold(f64::MAX, f64::min);
-        if outside > 0.0 { outside } else { inside }
+        if outside > 0.0 {
+            outside
+        } else {
+            inside
+        }
     };
     assert!(clean.iter().all(|&p| dist(p) < 1e-12));
     let noisy = synth::sample(&s, &opts(20_000, 0.01, 3));
@@ -113,8 +117,7 @@ fn mesh_truth_is_exactly_the_sharp_edges() {
         }
     }
     let cos30 = 30f64.to_radians().cos();
-    let sharp: HashSet<(usize, usize)> =
-        edge_faces.iter().filter(|(_, n)| n.len() == 2 && n[0].dot(n[1]) < cos30).map(|(e, _)| *e).collect();
+    let sharp: HashSet<(usize, usize)> = edge_faces.iter().filter(|(_, n)| n.len() == 2 && n[0].dot(n[1]) < cos30).map(|(e, _)| *e).collect();
     assert!(sharp.len() > 50, "anchor has many sharp edges ({})", sharp.len());
 
     let d = tempfile::tempdir().unwrap();

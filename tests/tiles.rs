@@ -111,11 +111,8 @@ fn interrupt_then_rerun_and_status() {
     let d = tempfile::tempdir().unwrap();
     let input = fixture("fandisk.las");
     let out = d.path().join("run");
-    let mut child = crease()
-        .args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", "0.2", "-q"])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child =
+        crease().args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", "0.2", "-q"]).stderr(Stdio::piped()).spawn().unwrap();
     std::thread::sleep(Duration::from_millis(700));
     let interrupted = child.try_wait().unwrap().is_none();
     if interrupted {

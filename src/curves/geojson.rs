@@ -4,8 +4,8 @@
 //! the full WKT in a `crs_wkt` member when the input carries one.
 
 use super::Polyline;
-use crate::points::Crs;
 use crate::error::{Error, Result};
+use crate::points::Crs;
 use serde_json::{json, Value};
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -38,8 +38,5 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
         })
         .collect();
     head.insert("features".into(), Value::Array(features));
-    serde_json::to_writer(&mut w, &Value::Object(head))
-        .map_err(std::io::Error::from)
-        .and_then(|_| w.flush())
-        .map_err(|e| Error::output(path, e))
+    serde_json::to_writer(&mut w, &Value::Object(head)).map_err(std::io::Error::from).and_then(|_| w.flush()).map_err(|e| Error::output(path, e))
 }

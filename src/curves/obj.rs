@@ -115,10 +115,7 @@ pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
         if closed {
             idx.pop();
         }
-        let vertices = idx
-            .iter()
-            .map(|&i| Vertex { corner: uses[i] > 1, ..Vertex::at(verts[i]) })
-            .collect();
+        let vertices = idx.iter().map(|&i| Vertex { corner: uses[i] > 1, ..Vertex::at(verts[i]) }).collect();
         out.push(Polyline { id: id.unwrap_or(k as u32), closed, vertices });
     }
     Ok(out)

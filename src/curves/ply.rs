@@ -58,10 +58,7 @@ pub fn write_ply(path: &Path, curves: &[Polyline]) -> Result<()> {
 pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
     let bytes = std::fs::read(path).map_err(|e| io_input(path, e))?;
     let bad = |m: &str| Error::input(path, m.to_string());
-    let end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .ok_or_else(|| bad("not a crease curve PLY (no end_header)"))?;
+    let end = bytes.windows(11).position(|w| w == b"end_header\n").ok_or_else(|| bad("not a crease curve PLY (no end_header)"))?;
     let head = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("PLY header is not text"))?;
     if !head.contains("format binary_little_endian") || !head.contains(HEADER) {
         return Err(bad("not a crease curve PLY (unexpected properties)"));

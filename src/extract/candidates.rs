@@ -5,9 +5,9 @@
 //! quadratic along the plane normal. Points with residual above tau are candidates; under noise,
 //! so are points where two planes fit clearly better than the quadratic (a gentle crease).
 
+use super::fit::{Frame, Pca, Quadric};
 use super::neighbourhood::{Cloud, Neighbourhood};
 use super::params::Resolved;
-use super::fit::{Frame, Pca, Quadric};
 use glam::DVec3;
 
 /// Most neighbours used by one fit (the nearest ones).

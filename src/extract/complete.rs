@@ -16,8 +16,8 @@
 //! Then short fragments with two free ends are dropped and the curves are relaxed by
 //! inverse-distance Laplacian smoothing in Taubin's shrink-free form, with ends and corners fixed.
 
-use glam::DVec3;
 use crate::grid::HashGrid;
+use glam::DVec3;
 
 /// A curve being completed.
 #[derive(Clone, Debug, PartialEq)]
@@ -53,7 +53,11 @@ impl Curve {
 
     /// Index of the vertex at end `e` (0: first vertex, 1: last).
     fn end_index(&self, e: usize) -> usize {
-        if e == 0 { 0 } else { self.v.len() - 1 }
+        if e == 0 {
+            0
+        } else {
+            self.v.len() - 1
+        }
     }
 
     /// The `k`-th vertex counted inwards from end `e`.

@@ -96,13 +96,21 @@ impl Pca {
     /// Linearity l0 / (l0 + l1 + l2), in [1/3, 1].
     pub fn linearity(&self) -> f64 {
         let s = self.values.iter().sum::<f64>();
-        if s > 0.0 { self.values[0] / s } else { 0.0 }
+        if s > 0.0 {
+            self.values[0] / s
+        } else {
+            0.0
+        }
     }
 
     /// Rotation-invariant line measure (l0 - l1) / (l0 + l1), in [0, 1].
     pub fn line_measure(&self) -> f64 {
         let s = self.values[0] + self.values[1];
-        if s > 0.0 { (self.values[0] - self.values[1]) / s } else { 0.0 }
+        if s > 0.0 {
+            (self.values[0] - self.values[1]) / s
+        } else {
+            0.0
+        }
     }
 }
 
@@ -239,7 +247,11 @@ impl Quadric {
         let phi = 0.5 * (2.0 * huv).atan2(huu - hvv);
         let root = ((huu - hvv).powi(2) + 4.0 * huv * huv).sqrt();
         let (l1, l2) = (0.5 * (huu + hvv + root), 0.5 * (huu + hvv - root));
-        if l1.abs() >= l2.abs() { phi } else { phi + std::f64::consts::FRAC_PI_2 }
+        if l1.abs() >= l2.abs() {
+            phi
+        } else {
+            phi + std::f64::consts::FRAC_PI_2
+        }
     }
 
     /// Weighted least-squares fit of heights over `frame` to `(point, weight)` pairs. The
@@ -388,7 +400,8 @@ mod tests {
             let scale = 10f64.powi(case % 10 - 6);
             // (Exact lines and planes, axis-aligned in every third case, have double or
             // zero eigenvalues.)
-            let spread = [DVec3::new(1.0, 1.0, 0.01), DVec3::new(1.0, 0.01, 0.01), DVec3::ONE, DVec3::new(1.0, 1.0, 1e-6), DVec3::X, DVec3::new(1.0, 1.0, 0.0)][case as usize % 6];
+            let spread = [DVec3::new(1.0, 1.0, 0.01), DVec3::new(1.0, 0.01, 0.01), DVec3::ONE, DVec3::new(1.0, 1.0, 1e-6), DVec3::X, DVec3::new(1.0, 1.0, 0.0)]
+                [case as usize % 6];
             let n = if case % 3 == 0 { DVec3::Z } else { DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5).normalize() };
             let axes = Frame::new(DVec3::ZERO, n);
             let pts: Vec<(DVec3, f64)> = (0..40)

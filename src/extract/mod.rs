@@ -72,4 +72,3 @@ pub struct Timings {
     /// Stage 5.
     pub completion: f64,
 }
-

@@ -350,6 +350,34 @@ impl Cloud {
         self.map_neighbourhoods_at(&at, nb, init, |s, k, buf| f(s, which[k as usize], buf))
     }
 
+    /// The positions `at` keyed by the block they fall in (see
+    /// [`Cloud::map_neighbourhoods_at`]), sorted by block.
+    fn block_order(&self, at: &[DVec3], r: f64) -> Vec<(u64, u32)> {
+        use rayon::prelude::*;
+        // Positions by block key. (A gridded cloud's own points come in key order already: then
+        // nothing is sorted, and the results come out in order.)
+        let mut order: Vec<(u64, u32)> = match &self.cells {
+            Some(cells) => at.par_iter().enumerate().map(|(k, &q)| (cells.key(q), k as u32)).collect(),
+            None => {
+                let cell = |q: DVec3| crate::grid::cell(q, BLOCK_CELL * r).to_array();
+                let mut by: Vec<([i64; 3], u32)> = at.iter().enumerate().map(|(k, &q)| (cell(q), k as u32)).collect();
+                by.par_sort_unstable();
+                let mut id = 0u64;
+                by.iter()
+                    .enumerate()
+                    .map(|(n, o)| {
+                        id += (n > 0 && o.0 != by[n - 1].0) as u64;
+                        (id, o.1)
+                    })
+                    .collect()
+            }
+        };
+        if !order.windows(2).all(|w| w[0] < w[1]) {
+            order.par_sort_unstable();
+        }
+        order
+    }
+
     /// Runs `f` on the neighbourhood (as [`Cloud::neighbours_in`] gives it) of every local
     /// position in `at`, in parallel, passing its index in `at` and returning the results in
     /// that order. The positions are taken in blocks, those in one cell of a grid (the cloud's,
@@ -371,24 +399,7 @@ impl Cloud {
         if ordered {
             self.prepare_ordering(at.len());
         }
-        // Positions by block key. (A gridded cloud's own points come in key order already: then
-        // nothing is sorted, and the results come out in order.)
-        let mut order: Vec<(u64, u32)> = match &self.cells {
-            Some(cells) => at.par_iter().enumerate().map(|(k, &q)| (cells.key(q), k as u32)).collect(),
-            None => {
-                let cell = |q: DVec3| crate::grid::cell(q, BLOCK_CELL * r).to_array();
-                let mut by: Vec<([i64; 3], u32)> = at.iter().enumerate().map(|(k, &q)| (cell(q), k as u32)).collect();
-                by.par_sort_unstable();
-                let mut id = 0u64;
-                by.iter().enumerate().map(|(n, o)| {
-                    id += (n > 0 && o.0 != by[n - 1].0) as u64;
-                    (id, o.1)
-                }).collect()
-            }
-        };
-        if !order.windows(2).all(|w| w[0] < w[1]) {
-            order.par_sort_unstable();
-        }
+        let order = self.block_order(at, r);
         let in_order = order.windows(2).all(|w| w[0].1 < w[1].1);
         let mut blocks: Vec<&[(u64, u32)]> = Vec::new();
         let mut rest = &order[..];
@@ -672,32 +683,32 @@ mod tests {
         }
         let gids: Vec<u64> = (0..world.len() as u64).rev().collect();
         for cloud in clouds(&world, &gids, DVec3::new(-1.0, -1.0, -1.0), 0.6) {
-        let which: Vec<u32> = (0..cloud.len() as u32).step_by(7).collect();
-        let plain: Vec<Vec<(u32, f32)>> = which
-            .iter()
-            .map(|&i| {
-                let mut out = Vec::new();
-                cloud.neighbours(cloud.at(i as usize), 0.6, 10, 40, &mut out);
-                out
-            })
-            .collect();
-        assert!(cloud.rank.get().is_none());
-        assert!(plain.iter().any(|b| b.len() == 40), "no ball was thinned");
-        // map_neighbourhoods builds the ranks; the per-point queries above compared coordinates.
-        let nb = Neighbourhood { radius: 0.6, reach: f64::INFINITY, min: 10, max: 40, ordered: true };
-        let ranked = cloud.map_neighbourhoods(&which, nb, || (), |_, _, buf| buf.to_vec());
-        assert!(cloud.rank.get().is_some());
-        let ids = |v: &Vec<Vec<(u32, f32)>>| v.iter().map(|b| b.iter().map(|a| a.0).collect::<Vec<_>>()).collect::<Vec<_>>();
-        assert_eq!(ids(&plain), ids(&ranked));
-        for b in &plain {
-            assert!(b.windows(2).all(|w| cloud.coordinate_order(w[0].0, w[1].0).is_lt()));
-            // (The order itself, spelled out with total_cmp.)
-            let by_cmp = |i: u32, j: u32| {
-                let (p, q) = (cloud.pos[i as usize], cloud.pos[j as usize]);
-                p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(cloud.gid[i as usize].cmp(&cloud.gid[j as usize]))
-            };
-            assert!(b.windows(2).all(|w| by_cmp(w[0].0, w[1].0).is_lt()));
-        }
+            let which: Vec<u32> = (0..cloud.len() as u32).step_by(7).collect();
+            let plain: Vec<Vec<(u32, f32)>> = which
+                .iter()
+                .map(|&i| {
+                    let mut out = Vec::new();
+                    cloud.neighbours(cloud.at(i as usize), 0.6, 10, 40, &mut out);
+                    out
+                })
+                .collect();
+            assert!(cloud.rank.get().is_none());
+            assert!(plain.iter().any(|b| b.len() == 40), "no ball was thinned");
+            // map_neighbourhoods builds the ranks; the per-point queries above compared coordinates.
+            let nb = Neighbourhood { radius: 0.6, reach: f64::INFINITY, min: 10, max: 40, ordered: true };
+            let ranked = cloud.map_neighbourhoods(&which, nb, || (), |_, _, buf| buf.to_vec());
+            assert!(cloud.rank.get().is_some());
+            let ids = |v: &Vec<Vec<(u32, f32)>>| v.iter().map(|b| b.iter().map(|a| a.0).collect::<Vec<_>>()).collect::<Vec<_>>();
+            assert_eq!(ids(&plain), ids(&ranked));
+            for b in &plain {
+                assert!(b.windows(2).all(|w| cloud.coordinate_order(w[0].0, w[1].0).is_lt()));
+                // (The order itself, spelled out with total_cmp.)
+                let by_cmp = |i: u32, j: u32| {
+                    let (p, q) = (cloud.pos[i as usize], cloud.pos[j as usize]);
+                    p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(cloud.gid[i as usize].cmp(&cloud.gid[j as usize]))
+                };
+                assert!(b.windows(2).all(|w| by_cmp(w[0].0, w[1].0).is_lt()));
+            }
         }
     }
 
@@ -719,18 +730,19 @@ mod tests {
                 let gids: Vec<u64> = pts.iter().map(|p| (p.x as u64) << 20 | (p.y as u64 & 0xFFFFF)).collect();
                 let mut per_cloud = Vec::new();
                 for cloud in clouds(pts, &gids, origin, r) {
-                let at: Vec<DVec3> = (3..9).flat_map(|x| (3..9).map(move |y| DVec3::new(500_000.0 + x as f64 + 0.5, 5_400_000.0 + y as f64, 100.0))).collect();
-                let local: Vec<DVec3> = at.iter().map(|&q| q - origin).collect();
-                let key = |j: u32| (cloud.at(j as usize) + cloud.origin).round().as_i64vec3().to_array();
-                let nb = Neighbourhood { radius: r, reach, min, max: 100, ordered: true };
-                let mut blocked = cloud.map_neighbourhoods_at(&local, nb, || (), |_, _, buf| buf.iter().map(|a| key(a.0)).collect::<Vec<_>>());
-                for (q, b) in local.iter().zip(&mut blocked) {
-                    let mut one = Vec::new();
-                    cloud.neighbours_in(*q, nb, &mut one);
-                    assert_eq!(one.iter().map(|a| key(a.0)).collect::<Vec<_>>(), *b, "query by query");
-                    b.sort();
-                }
-                per_cloud.push(blocked);
+                    let at: Vec<DVec3> =
+                        (3..9).flat_map(|x| (3..9).map(move |y| DVec3::new(500_000.0 + x as f64 + 0.5, 5_400_000.0 + y as f64, 100.0))).collect();
+                    let local: Vec<DVec3> = at.iter().map(|&q| q - origin).collect();
+                    let key = |j: u32| (cloud.at(j as usize) + cloud.origin).round().as_i64vec3().to_array();
+                    let nb = Neighbourhood { radius: r, reach, min, max: 100, ordered: true };
+                    let mut blocked = cloud.map_neighbourhoods_at(&local, nb, || (), |_, _, buf| buf.iter().map(|a| key(a.0)).collect::<Vec<_>>());
+                    for (q, b) in local.iter().zip(&mut blocked) {
+                        let mut one = Vec::new();
+                        cloud.neighbours_in(*q, nb, &mut one);
+                        assert_eq!(one.iter().map(|a| key(a.0)).collect::<Vec<_>>(), *b, "query by query");
+                        b.sort();
+                    }
+                    per_cloud.push(blocked);
                 }
                 assert!(per_cloud.iter().all(|b| *b == per_cloud[0]), "tree-indexed and gridded clouds differ");
                 per_cloud.swap_remove(0)
@@ -779,18 +791,18 @@ mod tests {
         let world: Vec<DVec3> = (0..144).map(|k| DVec3::new((k % 12) as f64, (k / 12) as f64, 0.0)).collect();
         let gids: Vec<u64> = (0..world.len() as u64).collect();
         for cloud in clouds(&world, &gids, DVec3::ZERO, 1.5) {
-        let at: Vec<DVec3> = (4..8).flat_map(|x| (4..8).map(move |y| DVec3::new(x as f64, y as f64, 0.0))).collect();
-        for (reach, count) in [(f64::INFINITY, 20), (2.0, 13), (1.0, 9)] {
-            let nb = Neighbourhood { radius: 1.5, reach, min: 20, max: 100, ordered: true };
-            let blocked = cloud.map_neighbourhoods_at(&at, nb, || (), |_, _, buf| buf.to_vec());
-            for (q, b) in at.iter().zip(&blocked) {
-                let mut one = Vec::new();
-                cloud.neighbours_in(*q, nb, &mut one);
-                assert_eq!(&one, b, "reach {reach}: query by query and by blocks");
-                assert_eq!(b.len(), count, "reach {reach} at {q}");
-                assert!(b.iter().all(|a| (a.1 as f64) <= reach.max(1.5).powi(2) + 1e-9), "reach {reach} at {q}");
+            let at: Vec<DVec3> = (4..8).flat_map(|x| (4..8).map(move |y| DVec3::new(x as f64, y as f64, 0.0))).collect();
+            for (reach, count) in [(f64::INFINITY, 20), (2.0, 13), (1.0, 9)] {
+                let nb = Neighbourhood { radius: 1.5, reach, min: 20, max: 100, ordered: true };
+                let blocked = cloud.map_neighbourhoods_at(&at, nb, || (), |_, _, buf| buf.to_vec());
+                for (q, b) in at.iter().zip(&blocked) {
+                    let mut one = Vec::new();
+                    cloud.neighbours_in(*q, nb, &mut one);
+                    assert_eq!(&one, b, "reach {reach}: query by query and by blocks");
+                    assert_eq!(b.len(), count, "reach {reach} at {q}");
+                    assert!(b.iter().all(|a| (a.1 as f64) <= reach.max(1.5).powi(2) + 1e-9), "reach {reach} at {q}");
+                }
             }
-        }
         }
     }
 }

@@ -135,7 +135,14 @@ pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3,
     }
     let mut traced = Traced { grown: grown.len() as u64, growing_seconds: t.elapsed().as_secs_f64(), ..Default::default() };
     let t = Instant::now();
-    let cp = complete::CompleteParams { step: r.step, reach: r.reach_steps, aperture_deg: r.aperture_deg, min_steps: 3.0, smooth_passes: 2, corner_zone: r.corner_radius };
+    let cp = complete::CompleteParams {
+        step: r.step,
+        reach: r.reach_steps,
+        aperture_deg: r.aperture_deg,
+        min_steps: 3.0,
+        smooth_passes: 2,
+        corner_zone: r.corner_radius,
+    };
     let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), grouped, &cp);
     traced.curves = to_polylines(&curves, index.as_ref(), &normals, origin, r.step);
     traced.completion_seconds = t.elapsed().as_secs_f64();
@@ -214,4 +221,3 @@ fn align(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
     let b = if b.dot(reference[1]) < 0.0 { -b } else { b };
     [a, b]
 }
-

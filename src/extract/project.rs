@@ -11,8 +11,8 @@
 //! (an edge point keeping both normals); with three or more, a corner point is also solved.
 //! Projections that move farther than the neighbourhood radius are culled (2008).
 
-use super::neighbourhood::{Cloud, Neighbourhood};
 use super::fit::{project_to_corner, project_to_intersection, Frame, Pca, Quadric};
+use super::neighbourhood::{Cloud, Neighbourhood};
 use super::params::Resolved;
 use crate::keys::position_key;
 use crate::rng::Rng;
@@ -171,7 +171,8 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges 
     // spacing), not by its id, so the same point gets the same stream in any file layout.
     let q = r.kappa / 4096.0;
     let ids: Vec<u64> = candidates.iter().map(|&i| position_key(cloud.at(i as usize) + cloud.origin, q)).collect();
-    let pp = ProjectParams { radius: r.rmls_radius, reach: r.halo(), min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed, noise: r.noise };
+    let pp =
+        ProjectParams { radius: r.rmls_radius, reach: r.halo(), min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed, noise: r.noise };
     let projected = project(cloud, candidates, &ids, &pp);
     let one_surface = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
     let o = cloud.origin;

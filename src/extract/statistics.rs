@@ -91,7 +91,6 @@ pub(crate) fn median(v: &mut [f64]) -> f64 {
     *v.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
 }
 
-
 /// A tile as the statistics pass sees it: the core box, the first halo, the position key
 /// quantum, the cloud's point count, and the seed of the sampling.
 #[derive(Clone, Copy, Debug)]
@@ -254,7 +253,10 @@ mod tests {
     fn near_keeps_every_point_within_the_radius_of_a_centre_and_drops_far_ones() {
         let mut rng = crate::rng::Rng::stream(3, 0);
         // Points on a tilted plane 1 km from the origin, a few of them centres.
-        let pts: Vec<DVec3> = (0..200_000).map(|_| DVec3::new(1000.0 + 50.0 * rng.f64(), -700.0 + 50.0 * rng.f64(), 0.0)).map(|p| DVec3::new(p.x, p.y, 0.3 * p.x - 0.2 * p.y)).collect();
+        let pts: Vec<DVec3> = (0..200_000)
+            .map(|_| DVec3::new(1000.0 + 50.0 * rng.f64(), -700.0 + 50.0 * rng.f64(), 0.0))
+            .map(|p| DVec3::new(p.x, p.y, 0.3 * p.x - 0.2 * p.y))
+            .collect();
         let centre: Vec<bool> = (0..pts.len()).map(|i| i % 5000 == 17).collect();
         let radius = 0.7;
         let keep = near(&pts, &centre, radius).expect("a few centres keep a small share");

@@ -5,8 +5,8 @@
 //! handful of loads per point); LAZ records are decompressed by `las`/`laz` in chunks, in
 //! parallel where the file has chunk tables, and decoded the same way.
 
-use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
 use crate::error::{io_input, Error, Result};
+use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
 use glam::DVec3;
 use memmap2::Mmap;
 use std::fs::File;
@@ -33,11 +33,7 @@ impl Layout {
         out.class.reserve(n);
         out.index.reserve(n);
         for (k, rec) in bytes.chunks_exact(rl).enumerate() {
-            let (class, withheld) = if self.extended {
-                (rec[16], rec[15] & 0x04 != 0)
-            } else {
-                (rec[15] & 0x1f, rec[15] & 0x80 != 0)
-            };
+            let (class, withheld) = if self.extended { (rec[16], rec[15] & 0x04 != 0) } else { (rec[15] & 0x1f, rec[15] & 0x80 != 0) };
             if !table[class as usize] || (withheld && !keep_withheld) {
                 continue;
             }
@@ -59,12 +55,8 @@ fn las_error(path: &Path, e: las::Error) -> Error {
             std::io::ErrorKind::UnexpectedEof => Error::input(path, "truncated LAS header or VLRs"),
             _ => io_input(path, io),
         },
-        las::Error::InvalidFileSignature(_) => {
-            Error::input(path, "not a LAS file (signature is not 'LASF')")
-        }
-        las::Error::LasZipError(z) => {
-            Error::input(path, format!("corrupt or truncated compressed point data: {z}"))
-        }
+        las::Error::InvalidFileSignature(_) => Error::input(path, "not a LAS file (signature is not 'LASF')"),
+        las::Error::LasZipError(z) => Error::input(path, format!("corrupt or truncated compressed point data: {z}")),
         other => Error::input(path, format!("invalid LAS file: {other}")),
     }
 }
@@ -116,10 +108,7 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
         f.len() as usize
     };
     if record_len < base_len {
-        return Err(Error::input(
-            path,
-            format!("point record length {record_len} is shorter than point format {fmt} needs ({base_len})"),
-        ));
+        return Err(Error::input(path, format!("point record length {record_len} is shorter than point format {fmt} needs ({base_len})")));
     }
     let count = header.number_of_points();
     if !compressed {
@@ -128,10 +117,7 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
             let holds = bytes.len() as u64 - offset_to_points.min(bytes.len() as u64);
             return Err(Error::input(
                 path,
-                format!(
-                    "header declares {count} points but the file holds only {} (truncated point data)",
-                    holds / record_len as u64
-                ),
+                format!("header declares {count} points but the file holds only {} (truncated point data)", holds / record_len as u64),
             ));
         }
     }
@@ -140,16 +126,13 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
 }
 
 fn crs_of(header: &las::Header) -> Crs {
-    let wkt = header
-        .get_wkt_crs_bytes()
-        .map(|b| String::from_utf8_lossy(b).trim_end_matches('\0').trim().to_string())
-        .filter(|s| !s.is_empty());
+    let wkt = header.get_wkt_crs_bytes().map(|b| String::from_utf8_lossy(b).trim_end_matches('\0').trim().to_string()).filter(|s| !s.is_empty());
     // A malformed GeoTIFF key directory only loses the EPSG code, not the file.
-    let epsg = header.get_geotiff_crs().ok().flatten().and_then(|g| {
-        g.get_projected_crs_geo_key_value()
-            .or_else(|| g.get_geodetic_crs_geo_key_value())
-            .filter(|&c| c != 0 && c != 32767)
-    });
+    let epsg = header
+        .get_geotiff_crs()
+        .ok()
+        .flatten()
+        .and_then(|g| g.get_projected_crs_geo_key_value().or_else(|| g.get_geodetic_crs_geo_key_value()).filter(|&c| c != 0 && c != 32767));
     Crs { wkt, epsg }
 }
 
@@ -233,13 +216,7 @@ impl LasReader {
     }
 
     /// Reads up to `max` records into `out` (filtered); returns the number of records read.
-    pub fn read_chunk(
-        &mut self,
-        max: usize,
-        out: &mut PointChunk,
-        table: &[bool; 256],
-        keep_withheld: bool,
-    ) -> Result<usize> {
+    pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256], keep_withheld: bool) -> Result<usize> {
         let left = self.header.count - self.next;
         let n = (max as u64).min(left) as usize;
         if n == 0 {
@@ -255,10 +232,7 @@ impl LasReader {
             Points::Compressed { reader, buf } => {
                 let got = reader.fill_points(n as u64, buf).map_err(|e| las_error(&self.path, e))?;
                 if got as usize != n {
-                    return Err(Error::input(
-                        &self.path,
-                        format!("header declares {} points but the data ends after {}", self.header.count, self.next + got),
-                    ));
+                    return Err(Error::input(&self.path, format!("header declares {} points but the data ends after {}", self.header.count, self.next + got)));
                 }
                 let layout = Layout { record_len: buf.record_len(), ..self.layout };
                 layout.decode(buf.raw_bytes(), self.next, out, table, keep_withheld);

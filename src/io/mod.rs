@@ -10,8 +10,8 @@ mod write;
 
 pub use write::{PointWriter, WriteOptions};
 
-use crate::points::{Bounds, CloudHeader, FileFormat, PointChunk};
 use crate::error::{io_input, Error, Result};
+use crate::points::{Bounds, CloudHeader, FileFormat, PointChunk};
 use std::path::{Path, PathBuf};
 
 /// Default number of points per chunk.
@@ -141,9 +141,7 @@ impl PointReader {
         let inner = match format_of(path) {
             Some(FileFormat::Las) | Some(FileFormat::Laz) => Inner::Las(las::LasReader::open(path)?),
             Some(FileFormat::Ply) => Inner::Ply(ply::PlyReader::open(path)?),
-            None => {
-                return Err(Error::input(path, "unknown file type (expected .las, .laz or .ply)"))
-            }
+            None => return Err(Error::input(path, "unknown file type (expected .las, .laz or .ply)")),
         };
         Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise })
     }

@@ -2,8 +2,8 @@
 //! read (as float or double); every other property and element is skipped. Binary files are
 //! memory-mapped.
 
-use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
 use crate::error::{io_input, Error, Result};
+use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
 use glam::DVec3;
 use memmap2::Mmap;
 use std::fs::File;
@@ -113,6 +113,52 @@ fn bad(path: &Path, msg: impl Into<String>) -> Error {
     Error::input(path, msg)
 }
 
+/// The encoding, version and elements a PLY header's text declares.
+fn parse_header(text: &str, path: &Path) -> Result<(Option<Encoding>, String, Vec<Element>)> {
+    let mut enc = None;
+    let mut version = String::new();
+    let mut elements: Vec<Element> = Vec::new();
+    for (lineno, line) in text.lines().enumerate().skip(1) {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        let err = |m: &str| bad(path, format!("PLY header line {}: {m}: '{}'", lineno + 1, line.trim()));
+        match t.first().copied() {
+            None | Some("comment") | Some("obj_info") => {}
+            Some("format") => {
+                enc = Some(match t.get(1).copied() {
+                    Some("ascii") => Encoding::Ascii,
+                    Some("binary_little_endian") => Encoding::Little,
+                    Some("binary_big_endian") => Encoding::Big,
+                    _ => return Err(err("unknown format")),
+                });
+                version = format!("{} {}", t.get(1).unwrap_or(&""), t.get(2).unwrap_or(&""));
+            }
+            Some("element") => {
+                let (Some(name), Some(count)) = (t.get(1), t.get(2).and_then(|c| c.parse().ok())) else {
+                    return Err(err("bad element"));
+                };
+                elements.push(Element { name: name.to_string(), count, props: vec![] });
+            }
+            Some("property") => {
+                let el = elements.last_mut().ok_or_else(|| err("property before any element"))?;
+                let prop = if t.get(1) == Some(&"list") {
+                    let (Some(c), Some(ty), Some(name)) = (t.get(2).and_then(|s| Scalar::parse(s)), t.get(3).and_then(|s| Scalar::parse(s)), t.get(4)) else {
+                        return Err(err("bad list property"));
+                    };
+                    Property { name: name.to_string(), list_count: Some(c), ty }
+                } else {
+                    let (Some(ty), Some(name)) = (t.get(1).and_then(|s| Scalar::parse(s)), t.get(2)) else {
+                        return Err(err("bad property"));
+                    };
+                    Property { name: name.to_string(), list_count: None, ty }
+                };
+                el.props.push(prop);
+            }
+            Some(_) => return Err(err("unknown keyword")),
+        }
+    }
+    Ok((enc, version, elements))
+}
+
 impl PlyReader {
     /// Maps the file and parses its header.
     pub fn open(path: &Path) -> Result<PlyReader> {
@@ -126,8 +172,7 @@ impl PlyReader {
         if !map.starts_with(b"ply") {
             return Err(bad(path, "not a PLY file (no 'ply' magic)"));
         }
-        let end = find(&map, b"end_header")
-            .ok_or_else(|| bad(path, "truncated PLY header (no end_header)"))?;
+        let end = find(&map, b"end_header").ok_or_else(|| bad(path, "truncated PLY header (no end_header)"))?;
         let mut body = end + b"end_header".len();
         // The header ends with one line break: "\n" or "\r\n".
         if map.get(body) == Some(&b'\r') {
@@ -137,54 +182,9 @@ impl PlyReader {
             body += 1;
         }
         let text = std::str::from_utf8(&map[..end]).map_err(|_| bad(path, "PLY header is not text"))?;
-        let mut enc = None;
-        let mut version = String::new();
-        let mut elements: Vec<Element> = Vec::new();
-        for (lineno, line) in text.lines().enumerate().skip(1) {
-            let t: Vec<&str> = line.split_whitespace().collect();
-            let err = |m: &str| bad(path, format!("PLY header line {}: {m}: '{}'", lineno + 1, line.trim()));
-            match t.first().copied() {
-                None | Some("comment") | Some("obj_info") => {}
-                Some("format") => {
-                    enc = Some(match t.get(1).copied() {
-                        Some("ascii") => Encoding::Ascii,
-                        Some("binary_little_endian") => Encoding::Little,
-                        Some("binary_big_endian") => Encoding::Big,
-                        _ => return Err(err("unknown format")),
-                    });
-                    version = format!("{} {}", t.get(1).unwrap_or(&""), t.get(2).unwrap_or(&""));
-                }
-                Some("element") => {
-                    let (Some(name), Some(count)) = (t.get(1), t.get(2).and_then(|c| c.parse().ok())) else {
-                        return Err(err("bad element"));
-                    };
-                    elements.push(Element { name: name.to_string(), count, props: vec![] });
-                }
-                Some("property") => {
-                    let el = elements.last_mut().ok_or_else(|| err("property before any element"))?;
-                    let prop = if t.get(1) == Some(&"list") {
-                        let (Some(c), Some(ty), Some(name)) =
-                            (t.get(2).and_then(|s| Scalar::parse(s)), t.get(3).and_then(|s| Scalar::parse(s)), t.get(4))
-                        else {
-                            return Err(err("bad list property"));
-                        };
-                        Property { name: name.to_string(), list_count: Some(c), ty }
-                    } else {
-                        let (Some(ty), Some(name)) = (t.get(1).and_then(|s| Scalar::parse(s)), t.get(2)) else {
-                            return Err(err("bad property"));
-                        };
-                        Property { name: name.to_string(), list_count: None, ty }
-                    };
-                    el.props.push(prop);
-                }
-                Some(_) => return Err(err("unknown keyword")),
-            }
-        }
+        let (enc, version, elements) = parse_header(text, path)?;
         let enc = enc.ok_or_else(|| bad(path, "PLY header has no format line"))?;
-        let vi = elements
-            .iter()
-            .position(|e| e.name == "vertex")
-            .ok_or_else(|| bad(path, "PLY file has no vertex element"))?;
+        let vi = elements.iter().position(|e| e.name == "vertex").ok_or_else(|| bad(path, "PLY file has no vertex element"))?;
         let vertex = elements[vi].clone();
         let mut xyz = [usize::MAX; 3];
         for (k, name) in ["x", "y", "z"].iter().enumerate() {
@@ -206,11 +206,7 @@ impl PlyReader {
                 if need > map.len() as u64 {
                     return Err(bad(
                         path,
-                        format!(
-                            "header declares {} vertices but the file holds only {} (truncated)",
-                            vertex.count,
-                            (map.len() - pos.min(map.len())) / sz
-                        ),
+                        format!("header declares {} vertices but the file holds only {} (truncated)", vertex.count, (map.len() - pos.min(map.len())) / sz),
                     ));
                 }
             }
@@ -296,9 +292,7 @@ impl PlyReader {
                     next_token(&self.map, &mut self.pos).ok_or_else(|| self.truncated(idx))?;
                 }
             } else if let Some(k) = self.xyz.iter().position(|&x| x == pi) {
-                v[k] = parse_tok(tok).ok_or_else(|| {
-                    bad(&self.path, format!("vertex {idx}: '{}' is not a number", String::from_utf8_lossy(tok)))
-                })?;
+                v[k] = parse_tok(tok).ok_or_else(|| bad(&self.path, format!("vertex {idx}: '{}' is not a number", String::from_utf8_lossy(tok))))?;
             }
         }
         Ok(())

@@ -1,7 +1,7 @@
 //! Streaming point output (LAS/LAZ through the `las` crate, binary PLY), used by `crease synth`.
 
-use crate::points::FileFormat;
 use crate::error::{Error, Result};
+use crate::points::FileFormat;
 use glam::DVec3;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -60,8 +60,7 @@ impl PointWriter {
                 }
                 let header = b.into_header().map_err(|e| Error::Usage(format!("{}: {e}", path.display())))?;
                 let f = File::create(path).map_err(out)?;
-                let w = las::Writer::new(BufWriter::with_capacity(1 << 20, f), header)
-                    .map_err(|e| Error::Usage(format!("{}: {e}", path.display())))?;
+                let w = las::Writer::new(BufWriter::with_capacity(1 << 20, f), header).map_err(|e| Error::Usage(format!("{}: {e}", path.display())))?;
                 Sink::Las(Box::new(w))
             }
             Some(FileFormat::Ply) => {
@@ -69,8 +68,7 @@ impl PointWriter {
                 let head = "ply\nformat binary_little_endian 1.0\ncomment crease synth\nelement vertex ";
                 w.write_all(head.as_bytes()).map_err(out)?;
                 let count_at = head.len() as u64;
-                write!(w, "{:<width$}\nproperty double x\nproperty double y\nproperty double z\nend_header\n", 0, width = PLY_COUNT_WIDTH)
-                    .map_err(out)?;
+                write!(w, "{:<width$}\nproperty double x\nproperty double y\nproperty double z\nend_header\n", 0, width = PLY_COUNT_WIDTH).map_err(out)?;
                 Sink::Ply { w, count_at, count: 0 }
             }
             _ => return Err(Error::Usage(format!("{}: output must end in .las, .laz or .ply", path.display()))),

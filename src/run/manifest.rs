@@ -70,11 +70,7 @@ pub struct Manifest {
 pub fn stamp(path: &Path) -> Result<InputStamp> {
     use std::io::Read;
     let meta = std::fs::metadata(path).map_err(|e| io_input(path, e))?;
-    let mtime_ns = meta
-        .modified()
-        .ok()
-        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-        .map_or(0, |d| d.as_nanos() as i128);
+    let mtime_ns = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos() as i128);
     let mut head = vec![0u8; 65536.min(meta.len() as usize)];
     std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut head)).map_err(|e| io_input(path, e))?;
     // The path is made absolute (symbolic links kept) so that a resume from another working
@@ -100,7 +96,9 @@ pub fn common_crs(headers: &[CloudHeader]) -> Result<Crs> {
 /// Reads the manifest of a workspace, if there is one.
 pub fn read(ws: &Workspace) -> Result<Option<Manifest>> {
     match ws.read(NAME)? {
-        Some(b) => serde_json::from_slice(&b).map(Some).map_err(|e| Error::Damaged { path: ws.path(NAME), what: "unreadable manifest".into(), source: Some(e.into()) }),
+        Some(b) => {
+            serde_json::from_slice(&b).map(Some).map_err(|e| Error::Damaged { path: ws.path(NAME), what: "unreadable manifest".into(), source: Some(e.into()) })
+        }
         None => Ok(None),
     }
 }
@@ -137,4 +135,3 @@ pub fn job_difference(old: &Job, new: &Job) -> String {
     }
     "the job changed".to_string()
 }
-

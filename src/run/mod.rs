@@ -222,7 +222,15 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
 /// ```
 pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Result<Extraction> {
     let here = PathBuf::from("<memory>");
-    let job = Job { version: env!("CARGO_PKG_VERSION").to_string(), inputs: vec![], params: params.clone(), classes: None, keep_noise: true, tile_size: opts.tile_size, memory: opts.memory };
+    let job = Job {
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        inputs: vec![],
+        params: params.clone(),
+        classes: None,
+        keep_noise: true,
+        tile_size: opts.tile_size,
+        memory: opts.memory,
+    };
     let bounds = || -> Result<(Bounds, u64)> {
         let b = Bounds::of(points.iter().copied());
         if b.is_empty() {
@@ -245,7 +253,11 @@ fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>
     match manifest::read(ws)? {
         Some(m) if m.job == job => return Ok((m, true)),
         Some(m) if !opts.force => {
-            return Err(Error::Usage(format!("{}: holds a different run: {}; use --force to start over", ws.root().display(), manifest::job_difference(&m.job, &job))))
+            return Err(Error::Usage(format!(
+                "{}: holds a different run: {}; use --force to start over",
+                ws.root().display(),
+                manifest::job_difference(&m.job, &job)
+            )))
         }
         _ => {}
     }
@@ -254,7 +266,16 @@ fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>
     }
     let (b, declared) = bounds()?;
     let size = opts.tile_size.unwrap_or_else(|| tile_size_for(&b, declared, opts.memory));
-    let m = Manifest { job, grid: Grid::new(&b, size), declared_points: declared, diag: b.diagonal(), bucketed: false, tile_points: vec![], resolved: None, finished: false };
+    let m = Manifest {
+        job,
+        grid: Grid::new(&b, size),
+        declared_points: declared,
+        diag: b.diagonal(),
+        bucketed: false,
+        tile_points: vec![],
+        resolved: None,
+        finished: false,
+    };
     manifest::save(ws, &m)?;
     Ok((m, false))
 }
@@ -390,7 +411,11 @@ impl<'a> Run<'a> {
         )?;
         self.pass.residuals_load = time.load;
         // (Read on the pool, which is idle here.)
-        let sums: Vec<ResidualSum> = self.tiles.par_iter().map(|&t| Ok(ResidualSum::of(records::read::<Residuals>(&self.ws, t)?.0.residual.iter().map(|x| x.value)))).collect::<Result<_>>()?;
+        let sums: Vec<ResidualSum> = self
+            .tiles
+            .par_iter()
+            .map(|&t| Ok(ResidualSum::of(records::read::<Residuals>(&self.ws, t)?.0.residual.iter().map(|x| x.value))))
+            .collect::<Result<_>>()?;
         let total = sums.into_iter().fold(ResidualSum::default(), |a, b| a + b);
         self.points = total.count();
         self.pass.residuals = t.elapsed().as_secs_f64();
@@ -459,7 +484,13 @@ impl<'a> Run<'a> {
         counts.corners = grouped.len() as u64;
         let smoothed = self.smooth(&boxes, origin, &grouped, r, counts.edge_points as usize)?;
         counts.unconfirmed = smoothed.unconfirmed;
-        let mut seconds = Timings { candidates: self.pass.residuals, projection: self.pass.projection, index: self.pass.statistics, smoothing: t.elapsed().as_secs_f64(), ..Default::default() };
+        let mut seconds = Timings {
+            candidates: self.pass.residuals,
+            projection: self.pass.projection,
+            index: self.pass.statistics,
+            smoothing: t.elapsed().as_secs_f64(),
+            ..Default::default()
+        };
         let traced = polylines::grow_and_complete(smoothed, &grouped, origin, r, &self.opts.debug);
         (counts.grown, counts.curves) = (traced.grown, traced.curves.len() as u64);
         (seconds.growing, seconds.completion) = (traced.growing_seconds, traced.completion_seconds);
@@ -485,7 +516,9 @@ impl<'a> Run<'a> {
                 || self.tile_edges(t, q),
                 || {
                     let near: Vec<u32> = boxes.iter().filter(|&&(u, ulo, uhi)| u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all()).map(|b| b.0).collect();
-                    near.par_iter().map(|&u| Ok(self.tile_edges(u, q)?.edges.into_iter().filter(|e| inside(e.p)).collect::<Vec<_>>())).collect::<Result<Vec<_>>>()
+                    near.par_iter()
+                        .map(|&u| Ok(self.tile_edges(u, q)?.edges.into_iter().filter(|e| inside(e.p)).collect::<Vec<_>>()))
+                        .collect::<Result<Vec<_>>>()
                 },
             );
             let (own, context) = (own?.edges, context?);
@@ -555,4 +588,3 @@ fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs) -> R
     let _ = std::fs::remove_dir(&tmp);
     Ok(())
 }
-

@@ -25,4 +25,3 @@ pub fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
     // Never more than needed to hold everything in one tile.
     size.min(ext.max_element() * 1.001)
 }
-

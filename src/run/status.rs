@@ -35,7 +35,8 @@ pub fn status(dir: &Path) -> Result<Status> {
     let m = manifest::read(&ws)?.ok_or_else(|| Error::input(dir, "not a crease run directory (no manifest.json)"))?;
     let tiles: Vec<u32> = (0..m.tile_points.len() as u32).filter(|&t| m.tile_points[t as usize] > 0).collect();
     let done = |dir: &str| tiles.iter().filter(|&&t| ws.exists(&super::records::name(dir, t))).count();
-    let passes: Vec<(String, usize)> = [("statistics", Stats::DIR), ("residuals", Residuals::DIR), ("projection", Edges::DIR)].iter().map(|(n, d)| (n.to_string(), done(d))).collect();
+    let passes: Vec<(String, usize)> =
+        [("statistics", Stats::DIR), ("residuals", Residuals::DIR), ("projection", Edges::DIR)].iter().map(|(n, d)| (n.to_string(), done(d))).collect();
     let summary = if m.finished {
         "finished".to_string()
     } else if !m.bucketed {
@@ -46,16 +47,30 @@ pub fn status(dir: &Path) -> Result<Status> {
             None => "curves and outputs left to do".to_string(),
         }
     };
-    Ok(Status { dir: dir.to_path_buf(), inputs: m.job.inputs.iter().map(|i| i.path.clone()).collect(), tiles: tiles.len(), bucketed: m.bucketed, passes, finished: m.finished, summary })
+    Ok(Status {
+        dir: dir.to_path_buf(),
+        inputs: m.job.inputs.iter().map(|i| i.path.clone()).collect(),
+        tiles: tiles.len(),
+        bucketed: m.bucketed,
+        passes,
+        finished: m.finished,
+        summary,
+    })
 }
 
 /// Formats a status for humans.
 pub fn render_status(s: &Status) -> String {
-    let mut out = format!("{}: {}\n  inputs     {}\n  tiles      {}\n  bucketed   {}\n", s.dir.display(), s.summary, s.inputs.len(), s.tiles, if s.bucketed { "yes" } else { "no" });
+    let mut out = format!(
+        "{}: {}\n  inputs     {}\n  tiles      {}\n  bucketed   {}\n",
+        s.dir.display(),
+        s.summary,
+        s.inputs.len(),
+        s.tiles,
+        if s.bucketed { "yes" } else { "no" }
+    );
     for (name, n) in &s.passes {
         out += &format!("  {name:<10} {n}/{}\n", s.tiles);
     }
     out += &format!("  outputs    {}\n", if s.finished { "written" } else { "not yet" });
     out
 }
-

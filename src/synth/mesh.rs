@@ -122,26 +122,16 @@ impl Mesh {
             }
         }
         let cos = angle_deg.to_radians().cos();
-        let mut out: Vec<[u32; 2]> = faces
-            .into_iter()
-            .filter(|(_, f)| f.len() == 2 && self.normal(f[0]).dot(self.normal(f[1])) < cos)
-            .map(|(e, _)| e)
-            .collect();
+        let mut out: Vec<[u32; 2]> =
+            faces.into_iter().filter(|(_, f)| f.len() == 2 && self.normal(f[0]).dot(self.normal(f[1])) < cos).map(|(e, _)| e).collect();
         out.sort_unstable();
         out
     }
 
     /// The mesh as sampleable surfaces with its sharp edges (chained) as truth.
     pub fn to_shape(&self, angle_deg: f64) -> Shape {
-        let surfaces = self
-            .triangles
-            .iter()
-            .map(|t| Surface::Triangle(t.map(|i| self.vertices[i as usize])))
-            .collect();
-        let truth = chain(&self.sharp_edges(angle_deg))
-            .into_iter()
-            .map(|c| c.into_iter().map(|i| self.vertices[i as usize]).collect())
-            .collect();
+        let surfaces = self.triangles.iter().map(|t| Surface::Triangle(t.map(|i| self.vertices[i as usize]))).collect();
+        let truth = chain(&self.sharp_edges(angle_deg)).into_iter().map(|c| c.into_iter().map(|i| self.vertices[i as usize]).collect()).collect();
         Shape { surfaces, truth }
     }
 }

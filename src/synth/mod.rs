@@ -12,12 +12,12 @@ pub mod scene;
 pub mod shapes;
 pub mod surface;
 
-use crate::points::Bounds;
 use crate::curves::{write_obj, Polyline};
 use crate::error::{Error, Result};
 use crate::io::{PointWriter, WriteOptions};
-use glam::DVec3;
+use crate::points::Bounds;
 use crate::rng::Rng;
+use glam::DVec3;
 use shapes::Shape;
 use std::path::{Path, PathBuf};
 use surface::AreaTable;
@@ -116,11 +116,7 @@ pub fn perturb(pts: &mut [DVec3], noise: f64, outliers: f64, rng: &mut Rng) {
         let pad = (hi - lo) * 0.05;
         for p in pts.iter_mut() {
             if rng.f64() < outliers {
-                *p = DVec3::new(
-                    rng.range(lo.x - pad.x, hi.x + pad.x),
-                    rng.range(lo.y - pad.y, hi.y + pad.y),
-                    rng.range(lo.z - pad.z, hi.z + pad.z),
-                );
+                *p = DVec3::new(rng.range(lo.x - pad.x, hi.x + pad.x), rng.range(lo.y - pad.y, hi.y + pad.y), rng.range(lo.z - pad.z, hi.z + pad.z));
             }
         }
     }

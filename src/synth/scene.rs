@@ -7,12 +7,12 @@
 //! building standing on the pavement. Every block is generated from its own random stream, so
 //! the output is deterministic by seed.
 
-use crate::rng::Rng;
 use super::surface::{AreaTable, Frame, Surface};
 use super::truth_polylines;
 use crate::curves::write_obj;
 use crate::error::{Error, Result};
 use crate::io::{PointWriter, WriteOptions};
+use crate::rng::Rng;
 use glam::{DVec2, DVec3};
 use std::path::Path;
 

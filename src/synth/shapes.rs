@@ -46,10 +46,12 @@ fn circle(c: DVec2, r: f64) -> Vec<DVec2> {
 /// Points on an arc from angle a0 to a1 (radians), `n` segments; `closed_end` includes a1.
 fn arc(c: DVec2, r: f64, a0: f64, a1: f64, n: usize, closed_end: bool) -> Vec<DVec2> {
     let m = if closed_end { n + 1 } else { n };
-    (0..m).map(|i| {
-        let a = a0 + (a1 - a0) * i as f64 / n as f64;
-        c + DVec2::new(a.cos(), a.sin()) * r
-    }).collect()
+    (0..m)
+        .map(|i| {
+            let a = a0 + (a1 - a0) * i as f64 / n as f64;
+            c + DVec2::new(a.cos(), a.sin()) * r
+        })
+        .collect()
 }
 
 fn sharp_vertices(l: &[DVec2]) -> Vec<bool> {

@@ -57,7 +57,11 @@ fn polygon_area(loops: &[Vec<DVec2>]) -> f64 {
         .enumerate()
         .map(|(k, l)| {
             let a: f64 = (0..l.len()).map(|i| l[i].perp_dot(l[(i + 1) % l.len()])).sum::<f64>().abs() / 2.0;
-            if k == 0 { a } else { -a }
+            if k == 0 {
+                a
+            } else {
+                -a
+            }
         })
         .sum()
 }
@@ -135,10 +139,7 @@ impl Surface {
 }
 
 fn grad(f: fn(DVec2) -> f64, p: DVec2, h: f64) -> DVec2 {
-    DVec2::new(
-        (f(p + DVec2::X * h) - f(p - DVec2::X * h)) / (2.0 * h),
-        (f(p + DVec2::Y * h) - f(p - DVec2::Y * h)) / (2.0 * h),
-    )
+    DVec2::new((f(p + DVec2::X * h) - f(p - DVec2::X * h)) / (2.0 * h), (f(p + DVec2::Y * h) - f(p - DVec2::Y * h)) / (2.0 * h))
 }
 
 /// Picks surfaces by area: cumulative area table for sampling.
