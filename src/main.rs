@@ -271,7 +271,7 @@ fn parse_size(s: &str) -> Result<u64, String> {
         _ => (t, 1),
     };
     let v: f64 = num.parse().map_err(|_| format!("'{s}' is not a size (e.g. 1G, 512M)"))?;
-    if !(v > 0.0) {
+    if v.is_nan() || v <= 0.0 {
         return Err(format!("'{s}' must be positive"));
     }
     Ok((v * mul as f64) as u64)

@@ -25,11 +25,8 @@ impl Bounds {
     /// Grows the box to hold `p`.
     #[inline]
     pub fn grow(&mut self, p: DVec3) {
-        let a = p.to_array();
-        for i in 0..3 {
-            self.min[i] = self.min[i].min(a[i]);
-            self.max[i] = self.max[i].max(a[i]);
-        }
+        self.min = DVec3::from(self.min).min(p).to_array();
+        self.max = DVec3::from(self.max).max(p).to_array();
     }
 
     /// Grows the box to hold `other`.

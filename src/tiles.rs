@@ -73,10 +73,10 @@ impl Grid {
     pub fn core(&self, t: u32) -> Bounds {
         let c = self.coords(t);
         let mut b = Bounds { min: [0.0; 3], max: [0.0; 3] };
-        for a in 0..3 {
-            let lo = self.origin[a] + c[a] as f64 * self.size;
-            b.min[a] = if c[a] == 0 { f64::NEG_INFINITY } else { lo };
-            b.max[a] = if c[a] + 1 == self.dims[a] { f64::INFINITY } else { lo + self.size };
+        for (a, &c) in c.iter().enumerate() {
+            let lo = self.origin[a] + c as f64 * self.size;
+            b.min[a] = if c == 0 { f64::NEG_INFINITY } else { lo };
+            b.max[a] = if c + 1 == self.dims[a] { f64::INFINITY } else { lo + self.size };
         }
         b
     }

@@ -1,19 +1,20 @@
-//! Reader tests on the real LAS/LAZ files in `../shared/data/real` (skipped when absent).
+//! Reader tests on the real LAS/LAZ files in `../shared/data/real` (ignored unless run with --include-ignored, as `.ci/run` does when they are there).
 
 mod common;
 
 use crease::io::{read_header, scan_bounds, Filter, PointReader};
 use std::path::PathBuf;
 
-fn real_dir() -> Option<PathBuf> {
+fn real_dir() -> PathBuf {
     common::shared_data("real")
 }
 
 /// Every file: the header count equals the number of records read, and the header bounds equal
 /// the min/max of a full read (to the file's coordinate resolution).
 #[test]
+#[ignore = "needs ../shared"]
 fn header_counts_and_bounds_match_a_full_read() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     let files = crease::io::expand_inputs(&[dir]).unwrap();
     assert_eq!(files.len(), 10, "expected the ten shared test files");
     for f in &files {
@@ -30,8 +31,9 @@ fn header_counts_and_bounds_match_a_full_read() {
 }
 
 #[test]
+#[ignore = "needs ../shared"]
 fn known_point_counts() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     for (name, count, fmt) in [
         ("autzen_trim.las", 110_000, 3),
         ("autzen_trim.laz", 110_000, 3),
@@ -52,8 +54,9 @@ fn known_point_counts() {
 
 /// LAS and LAZ copies of the same cloud decode to the same points.
 #[test]
+#[ignore = "needs ../shared"]
 fn las_and_laz_agree() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     let a = PointReader::open(&dir.join("autzen_trim.las"), &Filter::keep_all()).unwrap().read_all().unwrap();
     let b = PointReader::open(&dir.join("autzen_trim.laz"), &Filter::keep_all()).unwrap().read_all().unwrap();
     assert_eq!(a.xyz, b.xyz);
@@ -61,8 +64,9 @@ fn las_and_laz_agree() {
 }
 
 #[test]
+#[ignore = "needs ../shared"]
 fn crs_is_read() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     let h = read_header(&dir.join("file_with_both_wkt_and_geotiff_vlrs.las")).unwrap();
     assert!(h.crs.wkt.is_some() && h.crs.epsg.is_some());
     let h = read_header(&dir.join("las_with_several_extra_byte_bloc.laz")).unwrap();
@@ -73,8 +77,9 @@ fn crs_is_read() {
 
 /// Class filters: autzen has classes 1 and 2 only.
 #[test]
+#[ignore = "needs ../shared"]
 fn class_filter() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     let f = dir.join("autzen_trim.las");
     let all = PointReader::open(&f, &Filter::keep_all()).unwrap().read_all().unwrap();
     let ground = PointReader::open(&f, &Filter { classes: Some(vec![2]), keep_noise: false }).unwrap().read_all().unwrap();

@@ -216,7 +216,7 @@ fn catalog_with_mixed_crs_is_refused() {
         let wo = crease::io::WriteOptions { scale: 0.001, offset: DVec3::ZERO, epsg: Some(epsg) };
         let mut w = crease::io::PointWriter::create(&cat.join(format!("f{k}.las")), &wo).unwrap();
         let pts: Vec<DVec3> = (0..100).map(|i| DVec3::new(i as f64, (i * 7 % 13) as f64, 0.0)).collect();
-        w.write(&pts, &vec![2; 100]).unwrap();
+        w.write(&pts, &[2; 100]).unwrap();
         w.finish().unwrap();
     }
     let o = crease().args(["extract", cat.to_str().unwrap(), "-o", d.path().join("run").to_str().unwrap(), "-q"]).output().unwrap();

@@ -149,7 +149,7 @@ fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
             let mut best: Option<(f64, usize)> = None;
             grid.near(x, look, |k| {
                 let d = corners[k].distance(x);
-                if d <= look && in_cone(x, t, corners[k], cos, p.step) && best.map_or(true, |b| (d, k) < b) {
+                if d <= look && in_cone(x, t, corners[k], cos, p.step) && best.is_none_or(|b| (d, k) < b) {
                     best = Some((d, k));
                 }
             });
@@ -244,7 +244,7 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams) {
                     if d > look || d == 0.0 || !in_cone(x, t, q, cos, p.step) {
                         return;
                     }
-                    if best.map_or(true, |b| (d, cj, vi) < b) {
+                    if best.is_none_or(|b| (d, cj, vi) < b) {
                         best = Some((d, cj, vi));
                     }
                 });
@@ -342,7 +342,7 @@ fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: 
     true
 }
 
-fn join(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, f: usize) {
+fn join(curves: &mut [Curve], ci: usize, e: usize, cj: usize, f: usize) {
     let mut a = curves[ci].clone();
     let mut b = curves[cj].clone();
     if e == 0 {
@@ -558,7 +558,7 @@ mod tests {
     #[test]
     fn relaxation_damps_jitter_without_shrinking_a_loop() {
         // A unit circle of 64 vertices with alternating radial jitter of 0.01.
-        let radius = |k: usize| 1.0 + if k % 2 == 0 { 0.01 } else { -0.01 };
+        let radius = |k: usize| 1.0 + if k.is_multiple_of(2) { 0.01 } else { -0.01 };
         let v = (0..64).map(|k| {
             let t = k as f64 * std::f64::consts::TAU / 64.0;
             DVec3::new(t.cos(), t.sin(), 0.0) * radius(k)

@@ -292,7 +292,7 @@ fn find_surface(s: &mut Scratch, rng: &mut Rng, min_threshold: f64, min_count: u
         s.res.clear();
         s.res.extend(s.remaining.iter().map(|&j| (s.pts[j] - frame.o).dot(frame.n).abs()));
         let qv = *s.res.select_nth_unstable_by(q - 1, |a, b| a.total_cmp(b)).1;
-        if best.as_ref().map_or(true, |b| qv < b.0) {
+        if best.as_ref().is_none_or(|b| qv < b.0) {
             best = Some((qv, frame));
         }
         // A seed plane already at the noise floor cannot be beaten by more than noise: stop.

@@ -88,7 +88,7 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
     if bytes.len() < 227 {
         return Err(Error::input(path, format!("truncated LAS header ({} bytes, need 227)", bytes.len())));
     }
-    let raw = las::raw::Header::read_from(&bytes[..]).map_err(|e| las_error(path, e))?;
+    let raw = las::raw::Header::read_from(bytes).map_err(|e| las_error(path, e))?;
     let fmt = raw.point_data_record_format & 0x3f;
     let compressed = raw.point_data_record_format & 0x80 != 0;
     if fmt > 10 {

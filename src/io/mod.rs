@@ -22,19 +22,13 @@ pub const CLASS_LOW_NOISE: u8 = 7;
 /// ASPRS class for high noise (LAS 1.4).
 pub const CLASS_HIGH_NOISE: u8 = 18;
 
-/// Which points a reader hands out.
-#[derive(Clone, Debug)]
+/// Which points a reader hands out (by default: all classes, withheld and noise points dropped).
+#[derive(Clone, Debug, Default)]
 pub struct Filter {
     /// Keep only these classifications (all if `None`).
     pub classes: Option<Vec<u8>>,
     /// Keep withheld points and noise classes 7 and 18 (dropped by default).
     pub keep_noise: bool,
-}
-
-impl Default for Filter {
-    fn default() -> Self {
-        Filter { classes: None, keep_noise: false }
-    }
 }
 
 impl Filter {

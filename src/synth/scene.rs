@@ -152,9 +152,9 @@ pub fn write_scene(opts: &SceneOptions, out: &Path) -> Result<u64> {
     let (mut cum, mut written) = (0.0, 0u64);
     let mut xyz = Vec::new();
     let mut class = Vec::new();
-    for k in 0..g * g {
+    for (k, area) in areas.iter().enumerate() {
         let (i, j) = (k % g, k / g);
-        cum += areas[k];
+        cum += area;
         let target = ((cum / total) * opts.n as f64).round() as u64;
         let count = (target - written) as usize;
         let b = block(i, j, opts.seed, g);

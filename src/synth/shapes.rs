@@ -158,7 +158,7 @@ fn fandisk() -> Shape {
     use std::f64::consts::{FRAC_PI_2, PI};
     let mut profile = vec![DVec2::new(0.0, 0.0), DVec2::new(2.0, 0.0)];
     // Tangent fillet (no feature), then a flat, then a half-cylinder boss (two concave edges).
-    profile.extend(arc(DVec2::new(1.8, 0.3), 0.2, 0.0, FRAC_PI_2, 32, true).into_iter().map(|p| p));
+    profile.extend(arc(DVec2::new(1.8, 0.3), 0.2, 0.0, FRAC_PI_2, 32, true));
     profile.insert(2, DVec2::new(2.0, 0.3));
     profile.dedup_by(|a, b| a.distance(*b) < 1e-12);
     profile.extend(arc(DVec2::new(1.0, 0.5), 0.4, 0.0, PI, 128, true));
