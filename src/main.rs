@@ -125,7 +125,8 @@ enum Cmd {
         /// Tile edge length in model units (overrides the size derived from --memory).
         #[arg(long)]
         tile_size: Option<f64>,
-        /// Start over if the output directory holds a different run.
+        /// Start over, whatever the output directory holds (without it, a run continues the same
+        /// job and refuses a different one).
         #[arg(long)]
         force: bool,
         /// Process each input file on its own, with outputs in OUT/<file stem>/.

@@ -175,7 +175,7 @@ impl<'a> Store<'a> {
         let truncated = |_| Error::damaged(&path, "truncated tile store");
         let mut head = [0u8; codec::HEADER];
         let (mut meta, mut z) = (Vec::new(), Vec::new());
-        while f.read_exact_or_end(&mut head).map_err(|e| Error::input_from(&path, "unreadable", e))? {
+        while f.read_exact_or_end(&mut head).map_err(truncated)? {
             let h = codec::FrameHeader::parse(&head, KIND, &path)?;
             if h.meta_len != META {
                 return Err(Error::damaged(&path, "tile frame metadata of the wrong size"));

@@ -150,11 +150,21 @@ impl Source {
     /// Fills `buf`; false at the end of the file (nothing read).
     pub fn read_exact_or_end(&mut self, buf: &mut [u8]) -> std::io::Result<bool> {
         match self {
-            Source::File(f) => match f.read_exact(buf) {
-                Ok(()) => Ok(true),
-                Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => Ok(false),
-                Err(e) => Err(e),
-            },
+            Source::File(f) => {
+                // (The end of the file only before the first byte: a part of `buf` is a
+                // truncated file.)
+                let mut got = 0;
+                while got < buf.len() {
+                    match f.read(&mut buf[got..]) {
+                        Ok(0) if got == 0 => return Ok(false),
+                        Ok(0) => return Err(std::io::ErrorKind::UnexpectedEof.into()),
+                        Ok(n) => got += n,
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                        Err(e) => return Err(e),
+                    }
+                }
+                Ok(true)
+            }
             Source::Memory(b, at) => {
                 if *at >= b.len() {
                     return Ok(false);

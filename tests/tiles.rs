@@ -224,3 +224,39 @@ fn catalog_with_mixed_crs_is_refused() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("f1.las") && e.contains("CRS EPSG:2154 differs from EPSG:25832"), "{e}");
 }
+
+/// A damaged file in a run directory stops the next run with one line naming the file and
+/// what to do (a flipped byte in a tile's edge points once ended in 0 curves and exit 0);
+/// --force then starts over and gives the first run's outputs.
+#[test]
+fn damaged_run_directory_files_are_named() {
+    let d = tempfile::tempdir().unwrap();
+    let input = fixture("cube.las");
+    let out = d.path().join("run");
+    let run = |extra: &[&str]| {
+        let mut c = crease();
+        c.args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", "0.5", "-q"]).args(extra);
+        c.output().unwrap()
+    };
+    assert!(run(&[]).status.success());
+    let expect = outputs(&out);
+    for (file, offset) in [("edges/0.bin", 40), ("resid/0.bin", 40), ("stats/0.bin", 20), ("tiles/0.pts", 70), ("manifest.json", 0)] {
+        let path = out.join(file);
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[offset] ^= 0x5A;
+        std::fs::write(&path, &bytes).unwrap();
+        // (The statistics and the tile store are read again only by a run that needs them.)
+        if file.starts_with("stats") || file.starts_with("tiles") {
+            std::fs::remove_file(out.join("manifest.json")).unwrap();
+            assert!(run(&[]).status.success(), "a new run replaces {file}");
+            continue;
+        }
+        let o = run(&[]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{file}: {err}");
+        assert_eq!(err.lines().count(), 1, "{file}: {err}");
+        assert!(err.contains(&format!("{}: damaged run directory file", path.display())) && err.contains("--force"), "{file}: {err}");
+        assert!(run(&["--force"]).status.success());
+        assert_eq!(outputs(&out), expect, "{file}: --force gives the same outputs");
+    }
+}

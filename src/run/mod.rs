@@ -55,7 +55,7 @@ pub struct RunOptions {
     pub memory: u64,
     /// Tile edge length override.
     pub tile_size: Option<f64>,
-    /// Start over even if the directory holds a different job.
+    /// Start over, whatever the directory holds.
     pub force: bool,
     /// Progress output.
     pub progress: crate::progress::Mode,
@@ -247,12 +247,15 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
 }
 
 /// The plan step: continues the job the workspace holds, or plans it anew (the tile grid over
-/// `bounds()`, sized from the budget), refusing a different job unless forced. Returns the
+/// `bounds()`, sized from the budget); a different job is refused, and `--force` always starts
+/// over. Returns the
 /// manifest and whether the run resumes.
 fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions) -> Result<(Manifest, bool)> {
-    match manifest::read(ws)? {
+    // (With --force, whatever the directory holds, damaged or not, is replaced.)
+    let held = if opts.force { None } else { manifest::read(ws)? };
+    match held {
         Some(m) if m.job == job => return Ok((m, true)),
-        Some(m) if !opts.force => {
+        Some(m) => {
             return Err(Error::Usage(format!(
                 "{}: holds a different run: {}; use --force to start over",
                 ws.root().display(),
