@@ -129,6 +129,17 @@ fn distances(from: &Dense, to: &Dense, origin: DVec3) -> Vec<f64> {
 }
 
 /// Scores `curves` against `truth`.
+///
+/// ```
+/// use crease::curves::Polyline;
+/// use crease::eval::{evaluate, EvalOptions};
+/// use glam::DVec3;
+///
+/// let truth = vec![Polyline::from_points(0, [DVec3::ZERO, DVec3::X])];
+/// let found = vec![Polyline::from_points(0, [DVec3::new(0.0, 0.001, 0.0), DVec3::new(0.5, 0.001, 0.0)])];
+/// let s = evaluate(&truth, &found, &EvalOptions::default());
+/// assert!((s.recall - 0.5).abs() < 0.02 && s.precision == Some(1.0));
+/// ```
 pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> Scores {
     let tb = Bounds::of(truth.iter().flat_map(|c| c.vertices.iter().map(|v| v.p)));
     let diag = opts.diag.unwrap_or_else(|| tb.diagonal()).max(f64::MIN_POSITIVE);

@@ -26,6 +26,12 @@ pub struct FileInfo {
 /// Reads the header of `path` and estimates its point spacing from the first
 /// [`SPACING_SAMPLE`] points. For PLY files the bounds come from a full read, since PLY headers
 /// do not store them.
+///
+/// ```no_run
+/// let infos = crease::info::file_info(std::path::Path::new("scan.laz"))?;
+/// print!("{}", crease::info::render_text(&[infos]));
+/// # Ok::<(), crease::Error>(())
+/// ```
 pub fn file_info(path: &Path) -> Result<FileInfo> {
     let mut reader = PointReader::open(path, &Filter::keep_all())?;
     let mut header = reader.header().clone();

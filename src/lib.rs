@@ -17,11 +17,12 @@
 //! - [`eval`]: scores curves against ground truth;
 //! - [`synth`]: test clouds with known curves (shapes, meshes, a large scene).
 //!
-//! Leaves (import nothing of the crate but [`error`]): [`points`] (plain cloud data types),
-//! [`keys`] (position keys, hashing, snapping), [`rng`] (the keyed random stream), [`grid`]
-//! (cells of a uniform grid), [`spatial`] (the k-d tree), [`spacing`], [`codec`] (the record
-//! format of a run directory), [`workspace`] (run directory or memory), [`cancel`], [`debug`],
-//! [`progress`], [`mem`], [`error`].
+//! Shared mechanics, below all of those (each imports at most [`error`] and the ones listed
+//! before it): [`points`] (plain cloud data types), [`rng`] (the keyed random stream), [`keys`]
+//! (position keys, hashing, snapping), [`grid`] (cells of a uniform grid), [`spatial`] (the k-d
+//! tree), [`spacing`], [`codec`] (the record format of a run directory), [`workspace`] (a run
+//! directory or memory), [`cancel`], [`progress`], [`mem`]; and [`debug`] (intermediate point
+//! sets, written with the [`curves`] writer).
 #![warn(missing_docs)]
 
 pub mod cancel;

@@ -9,6 +9,16 @@ use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::path::Path;
 
 /// Writes `curves` to `path` as OBJ.
+///
+/// ```
+/// use crease::curves::{read_obj, write_obj, Polyline};
+/// use glam::DVec3;
+///
+/// let path = std::env::temp_dir().join("crease-doc-curves.obj");
+/// write_obj(&path, &[Polyline::from_points(0, [DVec3::ZERO, DVec3::X, DVec3::ONE])])?;
+/// assert_eq!(read_obj(&path)?[0].vertices.len(), 3);
+/// # Ok::<(), crease::Error>(())
+/// ```
 pub fn write_obj(path: &Path, curves: &[Polyline]) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);

@@ -17,7 +17,7 @@ pub const MIN_FIT_NEIGHBOURS: usize = 20;
 
 /// Under noise, a gentle crease is also a candidate when two planes explain its
 /// neighbourhood better than the quadric by this ratio of weighted residual sums of squares
-/// (see [`crease_across`]). The max residual alone is mostly the noise's extreme there: at 0.01
+/// (see `crease_across`). The max residual alone is mostly the noise's extreme there: at 0.01
 /// dB, the 30-45 degree feet of fandisk's fading ridge rarely rose above tau (44 and 41
 /// candidates along them against 319 along the crest) and were lost before projection.
 /// Quality table with the consensus filter, two seeds: fandisk 0.01 dB recall 0.91 / 0.94 ->
@@ -28,7 +28,7 @@ pub const CREASE_RATIO: f64 = 0.85;
 /// two-plane test).
 pub const CREASE_MIN_DEG: f64 = 20.0;
 
-/// A point's fit residual, and whether it passed the crease test (see [`crease_across`]).
+/// A point's fit residual, and whether it passed the crease test (see `crease_across`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Residual {
     /// Largest distance of a neighbour from the fitted quadric.

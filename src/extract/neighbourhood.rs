@@ -5,7 +5,7 @@ use crate::spatial::Index;
 use glam::DVec3;
 
 /// Points of one tile (core and halo) in local coordinates, indexed for neighbour queries.
-/// Points are stored in Morton (Z-curve) order, or cell by cell in a grid (see [`Cells`]), so
+/// Points are stored in Morton (Z-curve) order, or cell by cell in a grid (see `Cells`), so
 /// that consecutive points are spatial neighbours and per-point queries stay in cache; `ids`
 /// maps back to the caller's order.
 pub struct Cloud {

@@ -94,6 +94,12 @@ pub fn expand_inputs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
 
 /// Reads only the header of a point file. For PLY, whose header holds no bounds, the bounds
 /// are left empty; use [`scan_bounds`] to get them.
+///
+/// ```no_run
+/// let h = crease::io::read_header(std::path::Path::new("scan.laz"))?;
+/// println!("{} points, CRS {}", h.count, h.crs.summary());
+/// # Ok::<(), crease::Error>(())
+/// ```
 pub fn read_header(path: &Path) -> Result<CloudHeader> {
     match format_of(path) {
         Some(FileFormat::Las) | Some(FileFormat::Laz) => las::read_header(path),
@@ -131,6 +137,19 @@ pub struct PointReader {
 
 impl PointReader {
     /// Opens `path` and reads its header; points are read on demand.
+    ///
+    /// ```no_run
+    /// use crease::io::{Filter, PointReader, DEFAULT_CHUNK};
+    /// use crease::points::PointChunk;
+    ///
+    /// let mut r = PointReader::open(std::path::Path::new("scan.las"), &Filter::default())?;
+    /// let mut chunk = PointChunk::default();
+    /// while r.read_chunk(DEFAULT_CHUNK, &mut chunk)? > 0 {
+    ///     println!("{} points", chunk.len());
+    ///     chunk.clear();
+    /// }
+    /// # Ok::<(), crease::Error>(())
+    /// ```
     pub fn open(path: &Path, filter: &Filter) -> Result<PointReader> {
         let inner = match format_of(path) {
             Some(FileFormat::Las) | Some(FileFormat::Laz) => Inner::Las(las::LasReader::open(path)?),

@@ -27,6 +27,12 @@ pub struct Status {
 }
 
 /// Reads what a run directory has done.
+///
+/// ```no_run
+/// let s = crease::run::status(std::path::Path::new("run"))?;
+/// print!("{}", crease::run::render_status(&s));
+/// # Ok::<(), crease::Error>(())
+/// ```
 pub fn status(dir: &Path) -> Result<Status> {
     if !dir.is_dir() {
         return Err(Error::input(dir, "not a crease run directory (no such directory)"));

@@ -146,6 +146,14 @@ pub fn scale_for(diag: f64) -> f64 {
 }
 
 /// Samples `shape` and writes the cloud to `out` and its truth to [`truth_path`]`(out)`.
+///
+/// ```no_run
+/// use crease::synth::{shapes, write_sampled, SynthOptions};
+///
+/// let fandisk = shapes::shape("fandisk", 90.0).unwrap();
+/// write_sampled(&fandisk, &SynthOptions { noise: 0.005, ..Default::default() }, std::path::Path::new("fandisk.las"))?;
+/// # Ok::<(), crease::Error>(())
+/// ```
 pub fn write_sampled(shape: &Shape, opts: &SynthOptions, out: &Path) -> Result<usize> {
     if opts.n == 0 {
         return Err(Error::Usage("-n must be at least 1".into()));
