@@ -9,33 +9,33 @@
 //! - [`info`]: `crease info`, a file's header, CRS and spacing estimate;
 //! - [`tiles`]: the tile grid, the tile store (tiles written once, halos assembled on read),
 //!   the bucketer;
+//! - [`curves`]: the output polylines and their OBJ, PLY and GeoJSON writers and readers;
 //! - [`extract`]: the method, stage by stage, as functions of plain data (statistics,
 //!   candidates, projection, smoothing, growing, completion);
 //! - [`run`]: the pipeline (plan, bucket, statistics, residuals, projection, curves, write) over
 //!   a run directory or memory, resumable, with `crease status`;
-//! - [`curves`]: the output polylines and their OBJ, PLY and GeoJSON writers and readers;
 //! - [`eval`]: scores curves against ground truth;
 //! - [`synth`]: test clouds with known curves (shapes, meshes, a large scene).
 //!
 //! Shared mechanics, below all of those (each imports at most [`error`] and the ones listed
-//! before it): [`points`] (plain cloud data types), [`rng`] (the keyed random stream), [`keys`]
-//! (position keys, hashing, snapping), [`grid`] (cells of a uniform grid), [`spatial`] (the k-d
-//! tree), [`spacing`], [`codec`] (the record format of a run directory), [`workspace`] (a run
+//! before it): [`points`] (plain cloud data types), [`rng`] (the keyed random stream), `keys`
+//! (position keys, hashing, snapping), `grid` (cells of a uniform grid), [`spatial`] (the k-d
+//! tree), [`spacing`], `codec` (the record format of a run directory), `workspace` (a run
 //! directory or memory), [`cancel`], [`progress`], [`mem`]; and [`debug`] (intermediate point
 //! sets, written with the [`curves`] writer).
 #![warn(missing_docs)]
 
 pub mod cancel;
-pub mod codec;
+pub(crate) mod codec;
 pub mod curves;
 pub mod debug;
 pub mod error;
 pub mod eval;
 pub mod extract;
-pub mod grid;
+pub(crate) mod grid;
 pub mod info;
 pub mod io;
-pub mod keys;
+pub(crate) mod keys;
 pub mod mem;
 pub mod points;
 pub mod progress;
@@ -45,6 +45,6 @@ pub mod spacing;
 pub mod spatial;
 pub mod synth;
 pub mod tiles;
-pub mod workspace;
+pub(crate) mod workspace;
 
 pub use error::{Error, Result};

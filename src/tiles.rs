@@ -105,7 +105,7 @@ pub fn within(b: &Bounds, halo: f64, p: DVec3) -> bool {
     (0..3).all(|a| p[a] >= b.min[a] - halo && p[a] < b.max[a] + halo)
 }
 
-/// The tile store: each tile's points, as frames of the record codec (see [`crate::codec`])
+/// The tile store: each tile's points, as frames of the record codec (see `codec.rs`)
 /// appended to `tiles/<tile>.pts` in the run's workspace. A frame's metadata is its point count
 /// and bounding box, so readers skip frames outside a region without decompressing them.
 #[derive(Clone, Copy)]

@@ -99,7 +99,7 @@ pub struct StatsTile {
     pub core: Bounds,
     /// The halo the tile was first loaded with.
     pub halo: f64,
-    /// Quantum of the position keys (see [`crate::keys::key_quantum`]).
+    /// Quantum of the position keys (see `keys::key_quantum`).
     pub key_quantum: f64,
     /// Points in the whole cloud.
     pub total: u64,

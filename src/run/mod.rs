@@ -8,20 +8,20 @@
 //! - `manifest.json`: the job (inputs with size, mtime and header checksum; parameters; crease
 //!   version), the plan (grid), and what is done;
 //! - `tiles/`: bucketed points; `stats/`, `resid/`, `edges/`: one result file per tile and pass,
-//!   each a record of the codec (see [`crate::codec`]);
+//!   each a record of the codec (see `codec.rs`);
 //! - `curves.obj`, `curves.ply`, `curves.geojson`, `report.json`: the outputs.
 //!
 //! Every file is written to a temporary name, synced and renamed, and only then counted as
 //! done, so a run killed at any moment resumes where it stopped and ends with the same curves.
 
-pub mod bucket;
+pub(crate) mod bucket;
 pub mod manifest;
-pub mod pass;
+pub(crate) mod pass;
 pub mod plan;
-pub mod records;
+pub(crate) mod records;
 pub mod status;
 
-pub use bucket::Input;
+pub(crate) use bucket::Input;
 pub use manifest::{common_crs, InputStamp, Job, Manifest};
 pub use plan::{tile_size_for, BYTES_PER_POINT, MAX_TILE_POINTS};
 pub use status::{render_status, status, Status};
