@@ -56,8 +56,8 @@ fn las_error(path: &Path, e: las::Error) -> Error {
             _ => io_input(path, io),
         },
         las::Error::InvalidFileSignature(_) => Error::input(path, "not a LAS file (signature is not 'LASF')"),
-        las::Error::LasZipError(z) => Error::input(path, format!("corrupt or truncated compressed point data: {z}")),
-        other => Error::input(path, format!("invalid LAS file: {other}")),
+        las::Error::LasZipError(z) => Error::input_from(path, format!("corrupt or truncated compressed point data: {z}"), z),
+        other => Error::input_from(path, format!("invalid LAS file: {other}"), other),
     }
 }
 

@@ -58,9 +58,9 @@ impl PointWriter {
                 if let Some(code) = opts.epsg {
                     b.vlrs.push(geotiff_vlr(code));
                 }
-                let header = b.into_header().map_err(|e| Error::Usage(format!("{}: {e}", path.display())))?;
+                let header = b.into_header().map_err(|e| Error::output(path, std::io::Error::other(e)))?;
                 let f = File::create(path).map_err(out)?;
-                let w = las::Writer::new(BufWriter::with_capacity(1 << 20, f), header).map_err(|e| Error::Usage(format!("{}: {e}", path.display())))?;
+                let w = las::Writer::new(BufWriter::with_capacity(1 << 20, f), header).map_err(|e| Error::output(path, std::io::Error::other(e)))?;
                 Sink::Las(Box::new(w))
             }
             Some(FileFormat::Ply) => {
@@ -88,7 +88,7 @@ impl PointWriter {
                         classification: las::point::Classification::new(class.get(i).copied().unwrap_or(1)).unwrap_or_default(),
                         ..Default::default()
                     };
-                    w.write_point(point).map_err(|e| Error::Usage(format!("{}: {e}", self.path.display())))?;
+                    w.write_point(point).map_err(|e| Error::output(&self.path, std::io::Error::other(e)))?;
                 }
             }
             Sink::Ply { w, count, .. } => {
@@ -107,7 +107,7 @@ impl PointWriter {
     pub fn finish(self) -> Result<()> {
         let path = self.path;
         match self.sink {
-            Sink::Las(mut w) => w.close().map_err(|e| Error::Usage(format!("{}: {e}", path.display()))),
+            Sink::Las(mut w) => w.close().map_err(|e| Error::output(path, std::io::Error::other(e))),
             Sink::Ply { mut w, count_at, count } => {
                 let r = (|| {
                     w.flush()?;
