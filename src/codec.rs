@@ -62,15 +62,17 @@ impl FrameHeader {
         }
     }
 
-    /// Checks the metadata and compressed payload against the checksum, then decompresses.
-    pub fn open(&self, meta: &[u8], zstd: &[u8], path: &Path) -> Result<Vec<u8>> {
+    /// Checks the metadata and compressed payload against the checksum, then decompresses
+    /// with `zd` (a reader of many frames keeps one decompressor: making one per frame cost
+    /// more than decompressing the small frames of a tile store).
+    pub fn open(&self, meta: &[u8], zstd: &[u8], path: &Path, zd: &mut zstd::bulk::Decompressor) -> Result<Vec<u8>> {
         let mut h = crc32fast::Hasher::new();
         h.update(meta);
         h.update(zstd);
         if h.finalize() != self.crc {
             return Err(Error::damaged(path, "checksum mismatch"));
         }
-        let raw = zstd::bulk::decompress(zstd, self.raw_len).map_err(|e| Error::Damaged {
+        let raw = zd.decompress(zstd, self.raw_len).map_err(|e| Error::Damaged {
             path: path.to_path_buf(),
             what: "undecodable payload".into(),
             source: Some(e.into()),
@@ -113,7 +115,8 @@ pub fn unframe(bytes: &[u8], kind: [u8; 4], path: &Path) -> Result<Vec<u8>> {
     if bytes.len() != HEADER + h.meta_len + h.zstd_len {
         return Err(Error::damaged(path, "length does not match its header"));
     }
-    h.open(&bytes[HEADER..HEADER + h.meta_len], &bytes[HEADER + h.meta_len..], path)
+    let mut zd = zstd::bulk::Decompressor::new().map_err(|e| Error::input_from(path, "cannot decompress", e))?;
+    h.open(&bytes[HEADER..HEADER + h.meta_len], &bytes[HEADER + h.meta_len..], path, &mut zd)
 }
 
 /// A record being encoded: fields appended in little-endian order.

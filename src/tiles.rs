@@ -175,6 +175,7 @@ impl<'a> Store<'a> {
         let truncated = |_| Error::damaged(&path, "truncated tile store");
         let mut head = [0u8; codec::HEADER];
         let (mut meta, mut z) = (Vec::new(), Vec::new());
+        let mut zd = zstd::bulk::Decompressor::new().map_err(|e| Error::input_from(&path, "cannot decompress", e))?;
         while f.read_exact_or_end(&mut head).map_err(truncated)? {
             let h = codec::FrameHeader::parse(&head, KIND, &path)?;
             if h.meta_len != META {
@@ -200,7 +201,7 @@ impl<'a> Store<'a> {
             if h.raw_len != n * 32 {
                 return Err(Error::damaged(&path, "tile frame of the wrong length"));
             }
-            let raw = h.open(&meta, &z, &path)?;
+            let raw = h.open(&meta, &z, &path, &mut zd)?;
             let f64_at = |o: usize| f64::from_le_bytes(raw[o..o + 8].try_into().unwrap());
             for i in 0..n {
                 let p = DVec3::new(f64_at(8 * i), f64_at(8 * (n + i)), f64_at(8 * (2 * n + i)));
