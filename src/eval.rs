@@ -7,7 +7,10 @@
 //! - precision: share of extracted length within `tol * dB` of the truth;
 //! - mean / max distance: of extracted samples to the truth;
 //! - Chamfer distance: the average of the two directed mean distances; Hausdorff: the larger of
-//!   the two directed maximum distances. All distances are reported in dB units.
+//!   the two directed maximum distances. All distances are reported in dB units;
+//! - with a separation R: recall over the resolvable truth only, the truth farther than R from
+//!   any other feature (see [`EvalOptions::resolvable`]), so that targets can be stated honestly
+//!   where features lie closer together than the noise lets any method separate them.
 
 use crate::curves::Polyline;
 use crate::points::Bounds;
@@ -24,11 +27,17 @@ pub struct EvalOptions {
     pub tol: f64,
     /// Resampling step in dB units.
     pub step: f64,
+    /// Separation R in dB units: a truth sample is resolvable if every truth point within R
+    /// of it is reached from it along the truth curves (through shared corners) within 2 R,
+    /// so that only other, non-adjacent features count (a thin plate's opposite rims, the two
+    /// sides of a slot, a knife edge's neighbours), not the curve itself or the curves meeting
+    /// it at a corner.
+    pub resolvable: Option<f64>,
 }
 
 impl Default for EvalOptions {
     fn default() -> Self {
-        EvalOptions { diag: None, tol: 0.01, step: 0.001 }
+        EvalOptions { diag: None, tol: 0.01, step: 0.001, resolvable: None }
     }
 }
 
@@ -59,6 +68,19 @@ pub struct Scores {
     pub diag: f64,
     /// The tolerance used, in dB units.
     pub tol: f64,
+    /// Recall over the resolvable truth, if a separation was given.
+    pub resolvable: Option<Resolvable>,
+}
+
+/// Recall over the truth that lies farther than a separation from any other feature.
+#[derive(Clone, Debug, Serialize)]
+pub struct Resolvable {
+    /// The separation, in dB units.
+    pub separation: f64,
+    /// Share of the truth length that is resolvable.
+    pub share: f64,
+    /// Share of the resolvable truth length matched (None if none is resolvable).
+    pub recall: Option<f64>,
 }
 
 /// A densely resampled curve set: points, the length each midpoint stands for, and which
@@ -128,6 +150,78 @@ fn distances(from: &Dense, to: &Dense, origin: DVec3) -> Vec<f64> {
         .collect()
 }
 
+/// For every sample of the truth `t`: true if each truth point within `r` of it is reached
+/// from it along the truth curves within `2 r` (see [`EvalOptions::resolvable`]). Curves meet
+/// where their vertices coincide.
+fn resolvable(t: &Dense, r: f64, origin: DVec3) -> Vec<bool> {
+    use rayon::prelude::*;
+    use std::collections::HashMap;
+    // Graph nodes: the refined vertices, coincident ones merged.
+    let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
+    let node: Vec<u32> = t
+        .pts
+        .iter()
+        .map(|p| {
+            let n = ids.len() as u32;
+            *ids.entry(p.to_array().map(f64::to_bits)).or_insert(n)
+        })
+        .collect();
+    let mut adj: Vec<Vec<(u32, f64)>> = vec![vec![]; ids.len()];
+    // The segment of each sample (samples are the linked segments, in order).
+    let mut seg = Vec::with_capacity(t.samples.len());
+    for i in (0..t.link.len()).filter(|&i| t.link[i]) {
+        let (a, b) = (node[i], node[i + 1]);
+        let w = t.pts[i].distance(t.pts[i + 1]);
+        adj[a as usize].push((b, w));
+        adj[b as usize].push((a, w));
+        seg.push(i);
+    }
+    let index = Index::new(&t.pts.iter().map(|p| (*p - origin).as_vec3().to_array()).collect::<Vec<_>>());
+    t.samples
+        .par_iter()
+        .zip(&seg)
+        .map_init(
+            || (HashMap::new(), Vec::new()),
+            |(reached, nn), (&(p, _), &i)| {
+                // Nodes within 2 r along the curves (Dijkstra, bounded).
+                reached.clear();
+                let mut heap = std::collections::BinaryHeap::new();
+                for j in [i, i + 1] {
+                    heap.push(std::cmp::Reverse((ordered(p.distance(t.pts[j])), node[j])));
+                }
+                while let Some(std::cmp::Reverse((d, n))) = heap.pop() {
+                    if d.0 > 2.0 * r || reached.contains_key(&n) {
+                        continue;
+                    }
+                    reached.insert(n, ());
+                    for &(m, w) in &adj[n as usize] {
+                        heap.push(std::cmp::Reverse((ordered(d.0 + w), m)));
+                    }
+                }
+                nn.clear();
+                index.within(&(p - origin).as_vec3().to_array(), r as f32, nn);
+                nn.iter().all(|&(j, _)| t.pts[j as usize].distance(p) > r || reached.contains_key(&node[j as usize]))
+            },
+        )
+        .collect()
+}
+
+/// An f64 that orders totally (for the heap).
+#[derive(Clone, Copy, PartialEq, PartialOrd)]
+struct Ordered(f64);
+
+impl Eq for Ordered {}
+
+impl Ord for Ordered {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
+}
+
+fn ordered(x: f64) -> Ordered {
+    Ordered(x)
+}
+
 /// Scores `curves` against `truth`.
 ///
 /// ```
@@ -162,6 +256,7 @@ pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> 
         truth_length: tl / diag,
         diag,
         tol: opts.tol,
+        resolvable: None,
     };
     if t.samples.is_empty() || e.samples.is_empty() {
         return s;
@@ -172,6 +267,14 @@ pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> 
     let mean = |d: &Dense, dist: &[f64]| d.samples.iter().zip(dist).map(|(s, x)| s.1 * x).sum::<f64>() / total(d);
     let max = |dist: &[f64]| dist.iter().copied().fold(0.0, f64::max);
     s.recall = matched(&t, &dt) / tl;
+    if let Some(r) = opts.resolvable {
+        let ok = resolvable(&t, r * diag, origin);
+        let length = |want: Option<f64>| {
+            t.samples.iter().zip(&ok).zip(&dt).filter(|((_, &o), &x)| o && want.is_none_or(|tol| x <= tol)).map(|((s, _), _)| s.1).sum::<f64>()
+        };
+        let share = length(None);
+        s.resolvable = Some(Resolvable { separation: r, share: share / tl, recall: (share > 0.0).then(|| length(Some(tol)) / share) });
+    }
     s.precision = Some(matched(&e, &de) / el);
     s.mean_distance = Some(mean(&e, &de) / diag);
     s.max_distance = Some(max(&de) / diag);
@@ -184,7 +287,7 @@ pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> 
 pub fn render_text(s: &Scores) -> String {
     let o = |x: Option<f64>| x.map(|v| format!("{v:.6}")).unwrap_or_else(|| "n/a".into());
     format!(
-        "recall      {:.4}\nprecision   {}\nmean dist   {} dB\nmax dist    {} dB\nchamfer     {} dB\nhausdorff   {} dB\ncurves      {} (truth {})\nlength      {:.4} dB (truth {:.4} dB)\ndB          {}\ntolerance   {} dB\n",
+        "recall      {:.4}\nprecision   {}\nmean dist   {} dB\nmax dist    {} dB\nchamfer     {} dB\nhausdorff   {} dB\ncurves      {} (truth {})\nlength      {:.4} dB (truth {:.4} dB)\ndB          {}\ntolerance   {} dB\n{}",
         s.recall,
         s.precision.map(|v| format!("{v:.4}")).unwrap_or_else(|| "n/a".into()),
         o(s.mean_distance),
@@ -196,7 +299,13 @@ pub fn render_text(s: &Scores) -> String {
         s.extracted_length,
         s.truth_length,
         s.diag,
-        s.tol
+        s.tol,
+        s.resolvable.as_ref().map_or(String::new(), |r| format!(
+            "resolvable  recall {} over {:.1} % of the truth (features farther apart than {} dB)\n",
+            r.recall.map_or("n/a".into(), |x| format!("{x:.4}")),
+            100.0 * r.share,
+            r.separation
+        ))
     )
 }
 
@@ -260,6 +369,30 @@ mod tests {
         assert!((s.recall - 1.0).abs() < 1e-12);
         assert!((s.precision.unwrap() - 0.5).abs() < 1e-9, "{:?}", s.precision);
         assert_eq!(s.curves, 4);
+    }
+
+    #[test]
+    fn resolvable_recall_leaves_out_features_closer_than_the_separation() {
+        // A square loop (corners shared) and, 0.004 from the middle of its bottom side, a short
+        // parallel curve: a thin plate's other rim. At a separation of 0.01 the parts of both
+        // that face each other are not resolvable; the square's corners and the rest are.
+        let sq = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]];
+        let square = Polyline::from_points(0, sq.map(DVec3::from));
+        let rim = line(1, [0.3, -0.004, 0.0], [0.7, -0.004, 0.0]);
+        let truth = vec![square.clone(), rim.clone()];
+        // Found: the square only.
+        let o = EvalOptions { diag: Some(1.0), tol: 0.002, resolvable: Some(0.01), ..Default::default() };
+        let s = evaluate(&truth, &[square.clone()], &o);
+        let r = s.resolvable.unwrap();
+        // Unresolvable: the rim (0.4) and the square's side beside it (0.4 + about 0.01 each
+        // end), of 4.4.
+        assert!((r.share - (4.4 - 0.82) / 4.4).abs() < 0.005, "share {}", r.share);
+        assert!((r.recall.unwrap() - 1.0).abs() < 1e-9, "the missed rim is not resolvable");
+        assert!((s.recall - 4.0 / 4.4).abs() < 0.005, "plain recall {}", s.recall);
+        // Apart by more than the separation, everything is resolvable.
+        let far = line(1, [0.3, -0.05, 0.0], [0.7, -0.05, 0.0]);
+        let s = evaluate(&[square, far], &[rim], &o);
+        assert!((s.resolvable.unwrap().share - 1.0).abs() < 1e-9);
     }
 
     #[test]

@@ -163,6 +163,10 @@ enum Cmd {
         /// Match tolerance in dB units.
         #[arg(long, default_value_t = 0.01)]
         tol: f64,
+        /// Also score recall over the resolvable truth only: the truth farther than this
+        /// separation (dB units) from any other, non-adjacent feature.
+        #[arg(long)]
+        resolvable: Option<f64>,
         /// Machine-readable JSON output.
         #[arg(long)]
         json: bool,
@@ -319,10 +323,10 @@ fn run(cli: Cli) -> Result<(), Error> {
                 println!("{total} records in {secs:.3} s: {:.1} M points/s, peak RSS {:.1} MB", rate / 1e6, peak as f64 / 1e6);
             }
         }
-        Cmd::Eval { truth, curves, diag, tol, json } => {
+        Cmd::Eval { truth, curves, diag, tol, resolvable, json } => {
             let t = read_curves(&truth)?;
             let c = read_curves(&curves)?;
-            let s = crease::eval::evaluate(&t, &c, &crease::eval::EvalOptions { diag, tol, ..Default::default() });
+            let s = crease::eval::evaluate(&t, &c, &crease::eval::EvalOptions { diag, tol, resolvable, ..Default::default() });
             if json {
                 println!("{}", serde_json::to_string_pretty(&s).expect("scores serialise"));
             } else {
