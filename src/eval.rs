@@ -258,15 +258,11 @@ pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> 
         tol: opts.tol,
         resolvable: None,
     };
-    if t.samples.is_empty() || e.samples.is_empty() {
+    if t.samples.is_empty() {
         return s;
     }
-    let dt = distances(&t, &e, origin);
-    let de = distances(&e, &t, origin);
-    let matched = |d: &Dense, dist: &[f64]| d.samples.iter().zip(dist).filter(|(_, &x)| x <= tol).map(|(s, _)| s.1).sum::<f64>();
-    let mean = |d: &Dense, dist: &[f64]| d.samples.iter().zip(dist).map(|(s, x)| s.1 * x).sum::<f64>() / total(d);
-    let max = |dist: &[f64]| dist.iter().copied().fold(0.0, f64::max);
-    s.recall = matched(&t, &dt) / tl;
+    // (Nothing extracted: every truth sample is infinitely far.)
+    let dt = if e.samples.is_empty() { vec![f64::INFINITY; t.samples.len()] } else { distances(&t, &e, origin) };
     if let Some(r) = opts.resolvable {
         let ok = resolvable(&t, r * diag, origin);
         let length = |want: Option<f64>| {
@@ -275,6 +271,14 @@ pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> 
         let share = length(None);
         s.resolvable = Some(Resolvable { separation: r, share: share / tl, recall: (share > 0.0).then(|| length(Some(tol)) / share) });
     }
+    if e.samples.is_empty() {
+        return s;
+    }
+    let de = distances(&e, &t, origin);
+    let matched = |d: &Dense, dist: &[f64]| d.samples.iter().zip(dist).filter(|(_, &x)| x <= tol).map(|(s, _)| s.1).sum::<f64>();
+    let mean = |d: &Dense, dist: &[f64]| d.samples.iter().zip(dist).map(|(s, x)| s.1 * x).sum::<f64>() / total(d);
+    let max = |dist: &[f64]| dist.iter().copied().fold(0.0, f64::max);
+    s.recall = matched(&t, &dt) / tl;
     s.precision = Some(matched(&e, &de) / el);
     s.mean_distance = Some(mean(&e, &de) / diag);
     s.max_distance = Some(max(&de) / diag);
@@ -397,8 +401,10 @@ mod tests {
 
     #[test]
     fn nothing_extracted() {
-        let s = evaluate(&truth(), &[], &opts());
+        let s = evaluate(&truth(), &[], &EvalOptions { resolvable: Some(0.01), ..opts() });
         assert_eq!(s.recall, 0.0);
         assert!(s.precision.is_none());
+        let r = s.resolvable.unwrap();
+        assert_eq!((r.share, r.recall), (1.0, Some(0.0)));
     }
 }

@@ -193,6 +193,10 @@ struct SampleArgs {
     /// Noise level: points move by up to this many bounding-box diagonals.
     #[arg(long, default_value_t = 0.0)]
     noise: f64,
+    /// Noise level in point spacings: points move by up to this many times the clean cloud's
+    /// spacing kappa (scanner-like noise; instead of --noise).
+    #[arg(long, default_value_t = 0.0, conflicts_with = "noise")]
+    noise_spacing: f64,
     /// Share of points replaced by uniform outliers.
     #[arg(long, default_value_t = 0.0)]
     outliers: f64,
@@ -212,15 +216,16 @@ struct SampleArgs {
 
 impl SampleArgs {
     fn options(&self) -> Result<SynthOptions, Error> {
-        if !(0.0..=1.0).contains(&self.outliers) || self.noise < 0.0 || self.anisotropy < 1.0 {
-            return Err(Error::Usage("--noise must be >= 0, --outliers in [0, 1], --anisotropy >= 1".into()));
+        let at_least = |x: f64, lo: f64| x >= lo;
+        if !(0.0..=1.0).contains(&self.outliers) || !at_least(self.noise, 0.0) || !at_least(self.noise_spacing, 0.0) || !at_least(self.anisotropy, 1.0) {
+            return Err(Error::Usage("--noise and --noise-spacing must be >= 0, --outliers in [0, 1], --anisotropy >= 1".into()));
         }
         let sampling = match self.sampling {
             SamplingArg::Uniform => Sampling::Uniform,
             SamplingArg::Scanlines => Sampling::ScanLines { anisotropy: self.anisotropy },
             SamplingArg::Nonuniform => Sampling::NonUniform,
         };
-        Ok(SynthOptions { n: self.n, noise: self.noise, outliers: self.outliers, sampling, seed: self.seed })
+        Ok(SynthOptions { n: self.n, noise: self.noise, noise_spacing: self.noise_spacing, outliers: self.outliers, sampling, seed: self.seed })
     }
 }
 

@@ -127,7 +127,7 @@ fn noisy_cube() {
 /// where the projection's edge points and corners are biased by the third surface.
 #[test]
 fn cube_at_two_percent_noise() {
-    let o = SynthOptions { n: 200_000, noise: 0.02, outliers: 0.0, sampling: Sampling::Uniform, seed: 5 };
+    let o = SynthOptions { n: 200_000, noise: 0.02, noise_spacing: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: 5 };
     let (curves, s) = synth_scores("cube", 0.0, &o);
     eprintln!("cube 0.02 dB: {} curves, {s:?}", curves.len());
     assert!(s.recall >= 0.90, "recall {}", s.recall);
@@ -141,7 +141,7 @@ fn cube_at_two_percent_noise() {
 /// threads on this noisy path.
 #[test]
 fn fandisk_at_one_percent_noise() {
-    let o = SynthOptions { n: 500_000, noise: 0.01, outliers: 0.0, sampling: Sampling::Uniform, seed: 1 };
+    let o = SynthOptions { n: 500_000, noise: 0.01, noise_spacing: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: 1 };
     let sh = shape("fandisk", 0.0).unwrap();
     let pts = synth::sample(&sh, &o);
     let run = |threads: usize| {
@@ -180,7 +180,7 @@ fn synth_scores(name: &str, angle: f64, opts: &SynthOptions) -> (Vec<Polyline>, 
 #[test]
 fn angle_sweep() {
     for angle in [25.0, 45.0, 60.0, 90.0, 110.0, 140.0, 150.0, 160.0, 170.0] {
-        let o = SynthOptions { n: 20_000, noise: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: angle as u64 };
+        let o = SynthOptions { n: 20_000, noise: 0.0, noise_spacing: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: angle as u64 };
         let (curves, s) = synth_scores("wedge", angle, &o);
         eprintln!("wedge {angle}: {} curves, recall {} precision {:?}", curves.len(), s.recall, s.precision);
         if angle <= 150.0 {
@@ -195,10 +195,10 @@ fn angle_sweep() {
 /// Outliers and scan-line sampling: no curve through empty space.
 #[test]
 fn outliers_and_scan_lines() {
-    let o = SynthOptions { n: 30_000, noise: 0.0, outliers: 0.05, sampling: Sampling::Uniform, seed: 3 };
+    let o = SynthOptions { n: 30_000, noise: 0.0, noise_spacing: 0.0, outliers: 0.05, sampling: Sampling::Uniform, seed: 3 };
     let (_, s) = synth_scores("cube", 90.0, &o);
     assert!(s.recall >= 0.95 && s.precision.unwrap() >= 0.95, "outliers: {s:?}");
-    let o = SynthOptions { n: 60_000, noise: 0.0, outliers: 0.0, sampling: Sampling::ScanLines { anisotropy: 4.0 }, seed: 4 };
+    let o = SynthOptions { n: 60_000, noise: 0.0, noise_spacing: 0.0, outliers: 0.0, sampling: Sampling::ScanLines { anisotropy: 4.0 }, seed: 4 };
     let (_, s) = synth_scores("cube", 90.0, &o);
     assert!(s.recall >= 0.95 && s.precision.unwrap() >= 0.95, "scan lines: {s:?}");
 }

@@ -9,12 +9,12 @@ use glam::DVec3;
 use std::collections::HashSet;
 
 fn opts(n: usize, noise: f64, seed: u64) -> SynthOptions {
-    SynthOptions { n, noise, outliers: 0.0, sampling: Sampling::Uniform, seed }
+    SynthOptions { n, noise, noise_spacing: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed }
 }
 
 #[test]
 fn shape_truth_counts() {
-    for (name, curves) in [("cube", 12), ("octahedron", 12), ("holecube", 14), ("cylinder", 2), ("step", 18), ("chamfer", 15), ("wedge", 1)] {
+    for (name, curves) in [("cube", 12), ("octahedron", 12), ("holecube", 14), ("cylinder", 2), ("step", 18), ("chamfer", 15), ("wedge", 1), ("plate", 38), ("blade", 6)] {
         let s = shape(name, 90.0).unwrap();
         assert_eq!(s.truth.len(), curves, "{name}");
     }
@@ -43,6 +43,13 @@ fn noise_model_bounds_displacement() {
     let r = 0.01 * 3f64.sqrt();
     let d: Vec<f64> = noisy.iter().map(|&p| dist(p)).collect();
     assert!(d.iter().all(|&x| x <= r * 1.02), "max {}", d.iter().cloned().fold(0.0, f64::max));
+    assert!(d.iter().filter(|&&x| x > r / 2.0).count() > 1000);
+    // Noise in point spacings: the same cube, radius 4 kappa of the clean cloud.
+    let kappa = crease::spacing::spacing(&clean, 2000);
+    let noisy = synth::sample(&s, &SynthOptions { noise_spacing: 4.0, ..opts(20_000, 0.0, 3) });
+    let d: Vec<f64> = noisy.iter().map(|&p| dist(p)).collect();
+    let r = 4.0 * kappa;
+    assert!(d.iter().all(|&x| x <= r * 1.0001), "max {} of {r}", d.iter().cloned().fold(0.0, f64::max));
     assert!(d.iter().filter(|&&x| x > r / 2.0).count() > 1000);
 }
 

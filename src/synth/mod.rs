@@ -43,6 +43,9 @@ pub struct SynthOptions {
     pub n: usize,
     /// Noise level in units of the bounding-box diagonal.
     pub noise: f64,
+    /// Noise level in units of the clean cloud's point spacing kappa (used instead of `noise`
+    /// when positive): scanner-like noise, whose size follows the sampling, not the part.
+    pub noise_spacing: f64,
     /// Share of points replaced by outliers uniform in the (5% enlarged) bounding box.
     pub outliers: f64,
     /// Sampling pattern.
@@ -54,7 +57,7 @@ pub struct SynthOptions {
 impl Default for SynthOptions {
     /// 500 k points, uniform, no noise or outliers, seed 1 (as `crease synth`).
     fn default() -> Self {
-        SynthOptions { n: 500_000, noise: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: 1 }
+        SynthOptions { n: 500_000, noise: 0.0, noise_spacing: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: 1 }
     }
 }
 
@@ -97,15 +100,20 @@ pub fn sample(shape: &Shape, opts: &SynthOptions) -> Vec<DVec3> {
             }
         }
     }
-    perturb(&mut pts, opts.noise, opts.outliers, &mut Rng::stream(opts.seed, 2));
+    let radius = if opts.noise_spacing > 0.0 {
+        opts.noise_spacing * crate::spacing::spacing(&pts, 2000)
+    } else {
+        opts.noise * Bounds::of(pts.iter().copied()).diagonal()
+    };
+    perturb(&mut pts, radius, opts.outliers, &mut Rng::stream(opts.seed, 2));
     pts
 }
 
-/// Applies Daniels' noise (uniform in a ball of radius `noise * dB`) and replaces a share
-/// `outliers` of the points by uniform points in the enlarged bounding box.
-pub fn perturb(pts: &mut [DVec3], noise: f64, outliers: f64, rng: &mut Rng) {
+/// Applies Daniels' noise (uniform in a ball of radius `radius`) and replaces a share
+/// `outliers` of the points by uniform points in the (clean) bounding box, enlarged by 5 %.
+pub fn perturb(pts: &mut [DVec3], radius: f64, outliers: f64, rng: &mut Rng) {
     let b = Bounds::of(pts.iter().copied());
-    let r = noise * b.diagonal();
+    let r = radius;
     if r > 0.0 {
         for p in pts.iter_mut() {
             *p += rng.in_ball(r);

@@ -13,7 +13,7 @@ pub struct Shape {
 }
 
 /// Names accepted by [`shape`].
-pub const SHAPES: &[&str] = &["cube", "chamfer", "holecube", "cylinder", "step", "octahedron", "fandisk", "wedge"];
+pub const SHAPES: &[&str] = &["cube", "chamfer", "holecube", "cylinder", "step", "octahedron", "fandisk", "wedge", "plate", "blade"];
 
 /// Segments per full circle for arcs (chord error 1e-4 of the radius).
 const CIRCLE_SEGMENTS: usize = 256;
@@ -35,6 +35,8 @@ pub fn shape(name: &str, angle: f64) -> Option<Shape> {
         "octahedron" => octahedron(),
         "fandisk" => fandisk(),
         "wedge" => wedge(angle),
+        "plate" => plate(),
+        "blade" => blade(),
         _ => return None,
     })
 }
@@ -114,6 +116,27 @@ fn split_loop(l: &[DVec2], sharp: &[bool]) -> Vec<Vec<DVec2>> {
         }
     }
     out
+}
+
+/// A thin plate (1 x 0.7, 0.05 thick: 0.04 of its diagonal) with a bore and two slots as
+/// narrow as the plate is thick: features a few noise radii apart under noise.
+fn plate() -> Shape {
+    let rect = |x0: f64, y0: f64, x1: f64, y1: f64| vec![DVec2::new(x0, y0), DVec2::new(x1, y0), DVec2::new(x1, y1), DVec2::new(x0, y1)];
+    prism(&[rect(0.0, 0.0, 1.0, 0.7), circle(DVec2::new(0.25, 0.35), 0.1), rect(0.5, 0.15, 0.9, 0.2), rect(0.5, 0.5, 0.9, 0.55)], 0.05)
+}
+
+/// A blade: a lens-shaped section (two circular arcs, chord 1, 0.1 thick in the middle)
+/// extruded by 0.6; its two knife edges are 23 degree wedges, and towards them the two faces'
+/// cap outlines converge.
+fn blade() -> Shape {
+    let (half, sagitta): (f64, f64) = (0.5, 0.05);
+    let radius = (half * half + sagitta * sagitta) / (2.0 * sagitta);
+    let beta = (half / radius).asin();
+    let up = std::f64::consts::FRAC_PI_2;
+    // Upper arc from (0, 0) to (1, 0), then the lower one back.
+    let mut profile = arc(DVec2::new(half, sagitta - radius), radius, up + beta, up - beta, 128, false);
+    profile.extend(arc(DVec2::new(half, radius - sagitta), radius, -up + beta, -up - beta, 128, false));
+    prism(&[profile], 0.6)
 }
 
 fn octahedron() -> Shape {
