@@ -187,7 +187,7 @@ fn resolvable(t: &Dense, r: f64, origin: DVec3) -> Vec<bool> {
                 reached.clear();
                 let mut heap = std::collections::BinaryHeap::new();
                 for j in [i, i + 1] {
-                    heap.push(std::cmp::Reverse((ordered(p.distance(t.pts[j])), node[j])));
+                    heap.push(std::cmp::Reverse((Ordered(p.distance(t.pts[j])), node[j])));
                 }
                 while let Some(std::cmp::Reverse((d, n))) = heap.pop() {
                     if d.0 > 2.0 * r || reached.contains_key(&n) {
@@ -195,7 +195,7 @@ fn resolvable(t: &Dense, r: f64, origin: DVec3) -> Vec<bool> {
                     }
                     reached.insert(n, ());
                     for &(m, w) in &adj[n as usize] {
-                        heap.push(std::cmp::Reverse((ordered(d.0 + w), m)));
+                        heap.push(std::cmp::Reverse((Ordered(d.0 + w), m)));
                     }
                 }
                 nn.clear();
@@ -207,19 +207,21 @@ fn resolvable(t: &Dense, r: f64, origin: DVec3) -> Vec<bool> {
 }
 
 /// An f64 that orders totally (for the heap).
-#[derive(Clone, Copy, PartialEq, PartialOrd)]
+#[derive(Clone, Copy, PartialEq)]
 struct Ordered(f64);
 
 impl Eq for Ordered {}
+
+impl PartialOrd for Ordered {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
 
 impl Ord for Ordered {
     fn cmp(&self, other: &Self) -> std::cmp::Ordering {
         self.0.total_cmp(&other.0)
     }
-}
-
-fn ordered(x: f64) -> Ordered {
-    Ordered(x)
 }
 
 /// Scores `curves` against `truth`.
@@ -386,7 +388,7 @@ mod tests {
         let truth = vec![square.clone(), rim.clone()];
         // Found: the square only.
         let o = EvalOptions { diag: Some(1.0), tol: 0.002, resolvable: Some(0.01), ..Default::default() };
-        let s = evaluate(&truth, &[square.clone()], &o);
+        let s = evaluate(&truth, std::slice::from_ref(&square), &o);
         let r = s.resolvable.unwrap();
         // Unresolvable: the rim (0.4) and the square's side beside it (0.4 + about 0.01 each
         // end), of 4.4.

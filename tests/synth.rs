@@ -14,7 +14,9 @@ fn opts(n: usize, noise: f64, seed: u64) -> SynthOptions {
 
 #[test]
 fn shape_truth_counts() {
-    for (name, curves) in [("cube", 12), ("octahedron", 12), ("holecube", 14), ("cylinder", 2), ("step", 18), ("chamfer", 15), ("wedge", 1), ("plate", 38), ("blade", 6)] {
+    for (name, curves) in
+        [("cube", 12), ("octahedron", 12), ("holecube", 14), ("cylinder", 2), ("step", 18), ("chamfer", 15), ("wedge", 1), ("plate", 38), ("blade", 6)]
+    {
         let s = shape(name, 90.0).unwrap();
         assert_eq!(s.truth.len(), curves, "{name}");
     }
