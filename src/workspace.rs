@@ -15,18 +15,52 @@ pub struct Workspace {
     root: PathBuf,
     /// The files, when in memory.
     memory: Option<Mutex<HashMap<String, Arc<Vec<u8>>>>>,
+    /// The run directory's lock file, locked, once [`Workspace::lock`] took it.
+    lock: Option<std::fs::File>,
 }
+
+/// The lock file of a run directory.
+pub const LOCK: &str = "lock";
 
 impl Workspace {
     /// The run directory `dir` (created if needed).
     pub fn disk(dir: &Path) -> Result<Workspace> {
         std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
-        Ok(Workspace { root: dir.to_path_buf(), memory: None })
+        Ok(Workspace { root: dir.to_path_buf(), memory: None, lock: None })
     }
 
     /// A workspace that keeps its files in memory.
     pub fn memory() -> Workspace {
-        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())) }
+        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())), lock: None }
+    }
+
+    /// Takes the run directory for this process until the workspace is dropped: an advisory
+    /// lock on its lock file, which then holds this process's id. A directory another process
+    /// holds is refused, naming that process.
+    pub fn lock(&mut self) -> Result<()> {
+        if self.memory.is_some() || self.lock.is_some() {
+            return Ok(());
+        }
+        use std::io::{Seek, Write};
+        let p = self.path(LOCK);
+        let mut f = std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(false).open(&p).map_err(|e| Error::output(&p, e))?;
+        match f.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let mut holder = String::new();
+                let _ = f.read_to_string(&mut holder);
+                let who = holder.trim().parse::<u32>().map_or("another process".to_string(), |pid| format!("process {pid}"));
+                return Err(Error::Usage(format!(
+                    "{}: in use by another crease run ({who}); wait for it to end, or stop it, before running here",
+                    self.root.display()
+                )));
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(&p, e)),
+        }
+        let r = f.set_len(0).and_then(|_| f.rewind()).and_then(|_| writeln!(f, "{}", std::process::id()));
+        r.map_err(|e| Error::output(&p, e))?;
+        self.lock = Some(f);
+        Ok(())
     }
 
     /// True if the files are kept in memory.

@@ -184,3 +184,29 @@ fn valid_small_files_still_read() {
 fn shared(name: &str) -> PathBuf {
     common::shared_data(&format!("real/{name}"))
 }
+
+/// A tile size that would make more tiles than crease handles is refused at once (it once
+/// looped for minutes over a million empty tiles, or overflowed the tile count), and so is a
+/// manifest whose grid was edited to such a size.
+#[test]
+fn too_many_tiles_and_an_edited_grid_are_refused() {
+    let d = tmp();
+    let las = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las");
+    let out = d.path().join("run");
+    let run = |size: &str| crease(&["extract", las.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", size, "-q"]);
+    for size in ["1e-6", "0.01"] {
+        let (code, _, err) = run(size);
+        assert_eq!(code, 2, "{size}: {err}");
+        assert!(err.contains("tiles, more than the") && err.trim_end().lines().count() == 1, "{size}: {err}");
+    }
+    let (code, _, err) = run("0.5");
+    assert_eq!(code, 0, "{err}");
+    let manifest = out.join("manifest.json");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    m["grid"]["dims"] = serde_json::json!([100000, 100000, 1]);
+    std::fs::write(&manifest, m.to_string()).unwrap();
+    let (code, _, err) = run("0.5");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("manifest.json: damaged run directory file"), "{err}");
+}

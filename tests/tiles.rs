@@ -260,3 +260,36 @@ fn damaged_run_directory_files_are_named() {
         assert_eq!(outputs(&out), expect, "{file}: --force gives the same outputs");
     }
 }
+
+/// Two runs on one directory: the second is refused at once, naming the first's process, and
+/// the first ends with the outputs of a run alone (a second run started a moment after the
+/// first once bucketed every point twice and exited 0 with other curves).
+#[test]
+fn a_second_run_on_the_same_directory_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let input = fixture("fandisk.las");
+    let args = |out: &Path| {
+        let mut c = crease();
+        c.args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", "0.1", "-q"]);
+        c
+    };
+    let alone = d.path().join("alone");
+    assert!(args(&alone).status().unwrap().success());
+    let out = d.path().join("shared");
+    let mut first = args(&out).stderr(Stdio::piped()).spawn().unwrap();
+    // (The first takes the directory within moments of starting.)
+    let lock = out.join("lock");
+    let t = std::time::Instant::now();
+    while std::fs::read_to_string(&lock).map_or(true, |s| s.trim().is_empty()) {
+        assert!(t.elapsed() < Duration::from_secs(20), "the first run never took the directory");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let second = args(&out).output().unwrap();
+    // (The first run, hundreds of tiles, takes seconds; the refusal, moments.)
+    assert!(first.try_wait().unwrap().is_none(), "the first run ended before the second was refused: make it longer");
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(2), "{err}");
+    assert!(err.contains(&format!("in use by another crease run (process {})", first.id())), "{err}");
+    assert!(first.wait().unwrap().success());
+    assert_eq!(outputs(&out), outputs(&alone));
+}

@@ -182,7 +182,8 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         tile_size: opts.tile_size,
         memory: opts.memory,
     };
-    let ws = Workspace::disk(dir)?;
+    let mut ws = Workspace::disk(dir)?;
+    ws.lock()?;
     let bounds = || -> Result<(Bounds, u64)> {
         let mut b = Bounds::EMPTY;
         let mut declared = 0;
@@ -254,7 +255,15 @@ fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>
     // (With --force, whatever the directory holds, damaged or not, is replaced.)
     let held = if opts.force { None } else { manifest::read(ws)? };
     match held {
-        Some(m) if m.job == job => return Ok((m, true)),
+        Some(m) if m.job == job => {
+            // (An edited or damaged manifest must not size what the run allocates.)
+            let g = &m.grid;
+            let sane = g.tiles() <= crate::tiles::MAX_TILES && g.size > 0.0 && g.size.is_finite() && (!m.bucketed || m.tile_points.len() as u64 == g.tiles());
+            if !sane {
+                return Err(Error::damaged(ws.path(manifest::NAME), "its tile grid is not one crease planned"));
+            }
+            return Ok((m, true));
+        }
         Some(m) => {
             return Err(Error::Usage(format!(
                 "{}: holds a different run: {}; use --force to start over",
@@ -269,16 +278,17 @@ fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>
     }
     let (b, declared) = bounds()?;
     let size = opts.tile_size.unwrap_or_else(|| tile_size_for(&b, declared, opts.memory));
-    let m = Manifest {
-        job,
-        grid: Grid::new(&b, size),
-        declared_points: declared,
-        diag: b.diagonal(),
-        bucketed: false,
-        tile_points: vec![],
-        resolved: None,
-        finished: false,
-    };
+    let grid = Grid::new(&b, size);
+    if grid.tiles() > crate::tiles::MAX_TILES || !(size > 0.0 && size.is_finite()) {
+        return Err(Error::Usage(format!(
+            "tiles of size {size} over the bounds {:?} to {:?} would make {} tiles, more than the {} crease handles: use a larger --tile-size or --memory",
+            b.min,
+            b.max,
+            grid.tiles(),
+            crate::tiles::MAX_TILES
+        )));
+    }
+    let m = Manifest { job, grid, declared_points: declared, diag: b.diagonal(), bucketed: false, tile_points: vec![], resolved: None, finished: false };
     manifest::save(ws, &m)?;
     Ok((m, false))
 }
