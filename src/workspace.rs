@@ -246,5 +246,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         }
         Ok(())
     })();
-    r.map_err(|e| Error::output(path, e))
+    r.map_err(|e| {
+        // (A full disk must not leave the partial temporary file behind.)
+        let _ = std::fs::remove_file(&tmp);
+        Error::output(path, e)
+    })
 }

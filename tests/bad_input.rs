@@ -210,3 +210,29 @@ fn too_many_tiles_and_an_edited_grid_are_refused() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("manifest.json: damaged run directory file"), "{err}");
 }
+
+/// A FIFO named like a point file is refused rather than read forever, and a cloud whose
+/// points all lie at one position ends with a clear refusal (it panicked in the fits).
+#[test]
+fn fifos_and_clouds_without_spread_are_refused() {
+    let d = tmp();
+    let fifo = d.path().join("pipe.las");
+    let made = Command::new("mkfifo").arg(&fifo).status().map(|s| s.success()).unwrap_or(false);
+    if made {
+        let (code, _, err) = crease(&["extract", fifo.to_str().unwrap(), "-o", d.path().join("r1").to_str().unwrap(), "-q"]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("pipe.las: not a regular file"), "{err}");
+    }
+    let same = d.path().join("same.las");
+    let mut b = las::Builder::from((1, 2));
+    b.point_format = las::point::Format::new(0).unwrap();
+    let mut w = las::Writer::from_path(&same, b.into_header().unwrap()).unwrap();
+    for _ in 0..500 {
+        w.write_point(las::Point { x: 3.0, y: 4.0, z: 5.0, ..Default::default() }).unwrap();
+    }
+    w.close().unwrap();
+    let (code, _, err) = crease(&["extract", same.to_str().unwrap(), "-o", d.path().join("r2").to_str().unwrap(), "-q"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(!err.contains("panicked") && err.trim_end().lines().count() == 1, "{err}");
+    assert!(err.contains("same.las: the points have no spread"), "{err}");
+}

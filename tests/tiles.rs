@@ -293,3 +293,27 @@ fn a_second_run_on_the_same_directory_is_refused() {
     assert!(first.wait().unwrap().success());
     assert_eq!(outputs(&out), outputs(&alone));
 }
+
+/// The same job named another way is the same job: a default given explicitly (`--seed 1`), a
+/// path through `..`, and an input directory that is also the run directory (whose own
+/// curves.ply must not become an input).
+#[test]
+fn the_same_job_named_another_way_resumes() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("scans");
+    std::fs::create_dir(&dir).unwrap();
+    std::fs::copy(fixture("cube.las"), dir.join("cube.las")).unwrap();
+    let run = |input: &Path, extra: &[&str]| {
+        let out = crease().args(["extract", input.to_str().unwrap(), "-o", dir.to_str().unwrap(), "-q"]).args(extra).output().unwrap();
+        (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    assert_eq!(run(&dir, &[]), (true, String::new()));
+    let first = outputs(&dir);
+    let round = d.path().join("scans/../scans");
+    for extra in [&["--seed", "1"][..], &["--max-turn", "30", "--min-angle", "28"]] {
+        assert_eq!(run(&round, extra), (true, String::new()), "{extra:?}");
+        assert_eq!(outputs(&dir), first);
+    }
+    let (ok, err) = run(&dir, &["--seed", "2"]);
+    assert!(!ok && err.contains("the method parameters changed"), "{err}");
+}

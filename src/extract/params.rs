@@ -63,6 +63,12 @@ pub struct Resolved {
     pub seed: u64,
 }
 
+/// Default largest turn while growing, degrees.
+pub const DEFAULT_MAX_TURN_DEG: f64 = 30.0;
+/// Default gentlest crease kept, degrees between the surface normals.
+pub const DEFAULT_MIN_ANGLE_DEG: f64 = 28.0;
+/// Default seed of the robust fits' random streams.
+pub const DEFAULT_SEED: u64 = 1;
 /// Neighbours a fit should see; denser clouds are thinned to about this many.
 pub const TARGET_NEIGHBOURS: f64 = 150.0;
 /// The default length unit is at least this many noise deviations.
@@ -95,6 +101,18 @@ impl Resolved {
 }
 
 impl Params {
+    /// The same parameters with those given at their default value left unset, so that a job
+    /// that names a default (`--seed 1`) is the job that does not.
+    pub fn without_defaults(&self) -> Params {
+        let unless = |v: Option<f64>, default: f64| v.filter(|&x| x != default);
+        Params {
+            max_turn_deg: unless(self.max_turn_deg, DEFAULT_MAX_TURN_DEG),
+            min_angle_deg: unless(self.min_angle_deg, DEFAULT_MIN_ANGLE_DEG),
+            seed: self.seed.filter(|&s| s != DEFAULT_SEED),
+            ..self.clone()
+        }
+    }
+
     /// Resolves defaults given the measured spacing `kappa` and noise `noise`.
     pub fn resolve(&self, kappa: f64, noise: f64) -> Resolved {
         let kappa = self.kappa.unwrap_or(kappa);
@@ -110,13 +128,13 @@ impl Params {
             rmls_radius: rmls,
             min_threshold: 0.05 * scale,
             step,
-            max_turn_deg: self.max_turn_deg.unwrap_or(30.0),
-            min_angle_deg: self.min_angle_deg.unwrap_or(28.0),
+            max_turn_deg: self.max_turn_deg.unwrap_or(DEFAULT_MAX_TURN_DEG),
+            min_angle_deg: self.min_angle_deg.unwrap_or(DEFAULT_MIN_ANGLE_DEG),
             corner_radius: rmls,
             reach_steps: 4.0,
             aperture_deg: 45.0,
             linearity: 0.7,
-            seed: self.seed.unwrap_or(1),
+            seed: self.seed.unwrap_or(DEFAULT_SEED),
         }
     }
 }

@@ -86,6 +86,10 @@ pub fn expand_inputs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
             if format_of(p).is_none() {
                 return Err(Error::input(p, "unknown file type (expected .las, .laz or .ply)"));
             }
+            // (A FIFO or a device would block or never end.)
+            if !meta.is_file() {
+                return Err(Error::input(p, "not a regular file"));
+            }
             out.push(p.clone());
         }
     }

@@ -75,7 +75,7 @@ pub fn stamp(path: &Path) -> Result<InputStamp> {
     std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut head)).map_err(|e| io_input(path, e))?;
     // The path is made absolute (symbolic links kept) so that a resume from another working
     // directory, or with the same file named relatively, is recognised as the same run.
-    let path = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let path = lexically_normal(&std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf()));
     Ok(InputStamp { path, size: meta.len(), mtime_ns, header_hash: format!("{:016x}", fnv1a(&head)) })
 }
 
@@ -106,6 +106,24 @@ pub fn read(ws: &Workspace) -> Result<Option<Manifest>> {
 /// Saves the manifest atomically.
 pub fn save(ws: &Workspace, m: &Manifest) -> Result<()> {
     ws.write_atomic(NAME, serde_json::to_string_pretty(m).expect("manifest serialises").as_bytes())
+}
+
+/// `p` with `.` and `..` components resolved by name (`sub/../f.las` is `f.las`), so that
+/// the same file named two ways is one input. (Where `sub` is a symbolic link the name may
+/// point elsewhere; the stamp's size, time and header hash then tell the files apart.)
+fn lexically_normal(p: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for c in p.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 /// Describes how two jobs differ, for the refusal message.

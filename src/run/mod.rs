@@ -170,13 +170,21 @@ pub struct Extraction {
 /// ```
 pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
-    let files = io::expand_inputs(inputs)?;
+    // (An input directory that is also the run directory holds the run's own curves.ply: a
+    // second run would read it as points.)
+    let run_dir = dir.canonicalize().ok();
+    let in_run_dir =
+        |f: &PathBuf| run_dir.is_some() && f.file_name() == Some("curves.ply".as_ref()) && f.parent().and_then(|p| p.canonicalize().ok()) == run_dir;
+    let files: Vec<PathBuf> = io::expand_inputs(inputs)?.into_iter().filter(|f| !in_run_dir(f)).collect();
+    if files.is_empty() {
+        return Err(Error::input(&inputs[0], "holds no point files but the run's own outputs"));
+    }
     let headers = files.iter().map(|f| io::read_header(f)).collect::<Result<Vec<_>>>()?;
     let crs = common_crs(&headers)?;
     let job = Job {
         version: env!("CARGO_PKG_VERSION").to_string(),
         inputs: files.iter().map(|f| manifest::stamp(f)).collect::<Result<_>>()?,
-        params: params.clone(),
+        params: params.without_defaults(),
         classes: filter.classes.clone(),
         keep_noise: filter.keep_noise,
         tile_size: opts.tile_size,
@@ -333,6 +341,10 @@ impl<'a> Run<'a> {
         }
         self.tiles = (0..self.manifest.grid.len() as u32).filter(|&t| self.manifest.tile_points[t as usize] > 0).collect();
         let r = self.statistics(params)?;
+        // (All points at one position, or too few apart: every length of the method is zero.)
+        if !(r.kappa > 0.0 && r.kappa.is_finite() && r.fit_radius > 0.0 && r.rmls_radius > 0.0) {
+            return Err(Error::input(first_input, format!("the points have no spread (spacing {}): nothing to extract", r.kappa)));
+        }
         self.tau = self.residuals(&r, params)?;
         self.projection(&r)?;
         self.peak_rss_tiles = crate::mem::peak_rss();
@@ -377,7 +389,7 @@ impl<'a> Run<'a> {
         let kappa0 = crate::spacing::spacing(&probe.xyz, 2000);
         drop(probe);
         let total: u64 = tile_points.iter().sum();
-        let seed = params.seed.unwrap_or(1);
+        let seed = params.seed.unwrap_or(crate::extract::params::DEFAULT_SEED);
         let loading = |halo| Loading { halo, keep: 1.0, seed, key_quantum: self.kq };
         let halo0 = 24.0 * kappa0;
         // (The pool has little to do here but wait for the next tile, so the tile is indexed
