@@ -22,6 +22,12 @@ impl Bounds {
         self.min[0] > self.max[0]
     }
 
+    /// True if the box holds something and every bound is finite, with min <= max on each axis
+    /// (a box read from a header may be none of these).
+    pub fn is_usable(&self) -> bool {
+        (0..3).all(|a| self.min[a].is_finite() && self.max[a].is_finite() && self.min[a] <= self.max[a])
+    }
+
     /// Grows the box to hold `p`.
     #[inline]
     pub fn grow(&mut self, p: DVec3) {

@@ -283,18 +283,40 @@ impl PlyReader {
         Ok(())
     }
 
+    /// Reads vertex `idx` from its own line: a line with fewer or more values than the
+    /// header's properties is an error naming it (one extra value once shifted every later
+    /// vertex, and the run went on with 0 curves).
     fn read_ascii_vertex(&mut self, v: &mut [f64; 3], idx: u64) -> Result<()> {
+        let map: &[u8] = &self.map;
+        let mut pos = self.pos;
+        while pos < map.len() && map[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        if pos >= map.len() {
+            return Err(self.truncated(idx));
+        }
+        let start = pos;
+        let eol = map[pos..].iter().position(|&b| b == b'\n').map_or(map.len(), |k| pos + k);
+        let line = &map[..eol];
+        let wrong = |what: &str| {
+            let lineno = map[..start].iter().filter(|&&b| b == b'\n').count() + 1;
+            bad(&self.path, format!("vertex {idx} (line {lineno}): {what} values than the header's vertex properties"))
+        };
         for (pi, p) in self.vertex.props.iter().enumerate() {
-            let tok = next_token(&self.map, &mut self.pos).ok_or_else(|| self.truncated(idx))?;
+            let tok = next_token(line, &mut pos).ok_or_else(|| wrong("fewer"))?;
             if p.list_count.is_some() {
                 let k: usize = parse_tok(tok).ok_or_else(|| bad(&self.path, format!("vertex {idx}: bad list count")))? as usize;
                 for _ in 0..k {
-                    next_token(&self.map, &mut self.pos).ok_or_else(|| self.truncated(idx))?;
+                    next_token(line, &mut pos).ok_or_else(|| wrong("fewer"))?;
                 }
             } else if let Some(k) = self.xyz.iter().position(|&x| x == pi) {
                 v[k] = parse_tok(tok).ok_or_else(|| bad(&self.path, format!("vertex {idx}: '{}' is not a number", String::from_utf8_lossy(tok))))?;
             }
         }
+        if next_token(line, &mut pos).is_some() {
+            return Err(wrong("more"));
+        }
+        self.pos = pos;
         Ok(())
     }
 }

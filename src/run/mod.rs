@@ -196,7 +196,8 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         let mut b = Bounds::EMPTY;
         let mut declared = 0;
         for h in &headers {
-            b.union(&if h.bounds.is_empty() { io::scan_bounds(&h.path)?.0 } else { h.bounds });
+            // (Header bounds that are missing (PLY), not finite or inverted come from the points.)
+            b.union(&if h.bounds.is_usable() { h.bounds } else { io::scan_bounds(&h.path)?.0 });
             declared += h.count;
         }
         if b.is_empty() {
