@@ -267,8 +267,9 @@ pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> 
     let dt = if e.samples.is_empty() { vec![f64::INFINITY; t.samples.len()] } else { distances(&t, &e, origin) };
     if let Some(r) = opts.resolvable {
         let ok = resolvable(&t, r * diag, origin);
+        // (+ 0.0: an empty float sum is -0.0.)
         let length = |want: Option<f64>| {
-            t.samples.iter().zip(&ok).zip(&dt).filter(|((_, &o), &x)| o && want.is_none_or(|tol| x <= tol)).map(|((s, _), _)| s.1).sum::<f64>()
+            t.samples.iter().zip(&ok).zip(&dt).filter(|((_, &o), &x)| o && want.is_none_or(|tol| x <= tol)).map(|((s, _), _)| s.1).sum::<f64>() + 0.0
         };
         let share = length(None);
         s.resolvable = Some(Resolvable { separation: r, share: share / tl, recall: (share > 0.0).then(|| length(Some(tol)) / share) });
