@@ -63,11 +63,6 @@ impl Workspace {
         Ok(())
     }
 
-    /// True if the files are kept in memory.
-    pub fn in_memory(&self) -> bool {
-        self.memory.is_some()
-    }
-
     /// The root directory.
     pub fn root(&self) -> &Path {
         &self.root
