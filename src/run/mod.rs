@@ -176,9 +176,13 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let in_run_dir =
         |f: &PathBuf| run_dir.is_some() && f.file_name() == Some("curves.ply".as_ref()) && f.parent().and_then(|p| p.canonicalize().ok()) == run_dir;
     let files: Vec<PathBuf> = io::expand_inputs(inputs)?.into_iter().filter(|f| !in_run_dir(f)).collect();
-    if files.is_empty() {
-        return Err(Error::input(&inputs[0], "holds no point files but the run's own outputs"));
-    }
+    let Some(first) = files.first() else {
+        return match inputs.first() {
+            Some(dir) => Err(Error::input(dir, "holds no point files but the run's own outputs")),
+            None => Err(Error::Usage("no input files".into())),
+        };
+    };
+    let first = first.clone();
     let headers = files.iter().map(|f| io::read_header(f)).collect::<Result<Vec<_>>>()?;
     let crs = common_crs(&headers)?;
     let job = Job {
@@ -201,13 +205,13 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             declared += h.count;
         }
         if b.is_empty() {
-            return Err(Error::input(&files[0], "no points"));
+            return Err(Error::input(&first, "no points"));
         }
         Ok((b, declared))
     };
     let (manifest, resumed) = plan(&ws, job, bounds, opts)?;
     let mut run = Run::new(ws, manifest, opts);
-    let r = run.tile_passes(&Input::Files(&files, filter), params, &files[0])?;
+    let r = run.tile_passes(&Input::Files(&files, filter), params, &first)?;
     let tau = run.tau;
     let (curves, counts, seconds) = run.curves(&r)?;
     run.write(&curves, &crs)?;
@@ -241,6 +245,9 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
         tile_size: opts.tile_size,
         memory: opts.memory,
     };
+    if let Some(p) = points.iter().find(|p| !p.is_finite()) {
+        return Err(Error::input(&here, format!("a point is not finite: {p}")));
+    }
     let bounds = || -> Result<(Bounds, u64)> {
         let b = Bounds::of(points.iter().copied());
         if b.is_empty() {
