@@ -82,12 +82,7 @@ impl Error {
 
     /// The error for a thread `name` that panicked with `payload`.
     pub fn panic(name: &str, payload: Box<dyn std::any::Any + Send>) -> Self {
-        let what = payload
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "no message".to_string());
-        Error::Panic(name.to_string(), what)
+        Error::Panic(name.to_string(), panic_message(&payload))
     }
 
     /// Exit code for the CLI: 2 for bad input or usage, 1 for failures while writing, 130 when
@@ -112,4 +107,9 @@ pub fn io_input(path: &Path, e: std::io::Error) -> Error {
         _ => e.to_string(),
     };
     Error::input_from(path, msg, e)
+}
+
+/// The message a panic carried.
+pub fn panic_message(payload: &Box<dyn std::any::Any + Send>) -> String {
+    payload.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| payload.downcast_ref::<String>().cloned()).unwrap_or_else(|| "no message".to_string())
 }

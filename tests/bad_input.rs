@@ -276,3 +276,30 @@ fn header_bounds_that_are_not_numbers() {
     // (Collinear points: extraction runs and finds nothing, or refuses them clearly.)
     assert!(code == 0 || (code == 2 && err.trim_end().lines().count() == 1), "{code}: {err}");
 }
+
+/// A LAZ header that disagrees with its compressed data: a record length two bytes longer than
+/// the laszip items (an assertion inside the `laz` crate, which reached the user as a panic),
+/// and a chunk size of 1. Both: exit 2 and one line naming the file.
+#[test]
+#[ignore = "needs ../shared"]
+fn laz_headers_that_disagree_with_their_data() {
+    let real = shared("autzen_trim.laz");
+    let d = tmp();
+    let bytes = std::fs::read(&real).unwrap();
+    // Record length (LAS header byte 105).
+    let mut rl = bytes.clone();
+    let len = u16::from_le_bytes([rl[105], rl[106]]) + 2;
+    rl[105..107].copy_from_slice(&len.to_le_bytes());
+    // The laszip VLR's chunk size: 12 bytes into its payload, which follows the 54-byte VLR header.
+    let mut chunk = bytes.clone();
+    let at = chunk.windows(14).position(|w| w == b"laszip encoded").unwrap() - 2 + 54 + 12;
+    chunk[at..at + 4].copy_from_slice(&1u32.to_le_bytes());
+    for (name, b) in [("record_length.laz", rl), ("chunk_size.laz", chunk)] {
+        let p = d.path().join(name);
+        std::fs::write(&p, b).unwrap();
+        let (code, _, err) = crease(&["extract", p.to_str().unwrap(), "-o", d.path().join(format!("run_{name}")).to_str().unwrap(), "-q"]);
+        assert_eq!(code, 2, "{name}: {err}");
+        assert!(!err.contains("panicked") && err.trim_end().lines().count() == 1, "{name}: {err}");
+        assert!(err.contains(name) && err.contains("compressed point data"), "{name}: {err}");
+    }
+}
