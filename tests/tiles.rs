@@ -317,3 +317,36 @@ fn the_same_job_named_another_way_resumes() {
     let (ok, err) = run(&dir, &["--seed", "2"]);
     assert!(!ok && err.contains("the method parameters changed"), "{err}");
 }
+
+/// Ctrl-C in the middle of a tile's fits ends the run within a second (the passes check the
+/// flag between blocks of neighbourhoods, not only between tiles, which take seconds), and
+/// the run then resumes to the outputs of a run never interrupted.
+#[test]
+fn an_interrupt_ends_a_tile_within_a_second() {
+    let d = tempfile::tempdir().unwrap();
+    let las = d.path().join("cube.las");
+    let synth = crease().args(["synth", "shape", "cube", "-n", "500000", "--noise", "0.005", "-o", las.to_str().unwrap()]).output().unwrap();
+    assert!(synth.status.success());
+    let args = |out: &Path| {
+        let mut c = crease();
+        c.args(["extract", las.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
+        c
+    };
+    let alone = d.path().join("alone");
+    let t = std::time::Instant::now();
+    assert!(args(&alone).status().unwrap().success());
+    let full = t.elapsed();
+    let out = d.path().join("run");
+    let mut child = args(&out).stderr(Stdio::piped()).spawn().unwrap();
+    // (Half way: in the residual or the projection pass of the one tile.)
+    std::thread::sleep(full / 2);
+    assert!(child.try_wait().unwrap().is_none(), "the run ended before it could be interrupted");
+    let sent = std::time::Instant::now();
+    unsafe { libc_kill(child.id() as i32, 2) };
+    let o = child.wait_with_output().unwrap();
+    let took = sent.elapsed();
+    assert_eq!(o.status.code(), Some(130), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(took < Duration::from_secs(1), "the run took {took:?} to stop (a whole run takes {full:?})");
+    assert!(args(&out).status().unwrap().success());
+    assert_eq!(outputs(&out), outputs(&alone));
+}

@@ -31,8 +31,9 @@ pub struct Grown {
     pub closed: bool,
 }
 
-/// Grows polylines through `points`, whose k-d tree is `index`.
-pub fn grow(points: &[DVec3], index: &Index, p: &GrowParams) -> Vec<Grown> {
+/// Grows polylines through `points`, whose k-d tree is `index`. Stops early, with the
+/// polylines grown so far, once `cancel` is set (the caller sees the flag and discards them).
+pub fn grow(points: &[DVec3], index: &Index, p: &GrowParams, cancel: &crate::cancel::Cancel) -> Vec<Grown> {
     let n = points.len();
     if n < 2 {
         return vec![];
@@ -55,7 +56,10 @@ pub fn grow(points: &[DVec3], index: &Index, p: &GrowParams) -> Vec<Grown> {
     let mut consumed = vec![false; n];
     let mut nn = Vec::new();
     let mut out = vec![];
-    for &s in &order {
+    for (k, &s) in order.iter().enumerate() {
+        if k % 4096 == 0 && cancel.is_set() {
+            break;
+        }
         let s = s as usize;
         if consumed[s] {
             continue;

@@ -32,6 +32,9 @@ pub struct Cloud {
     /// How far an f32 distance between two points may be from the f64 one: each local
     /// coordinate is rounded to f32 by up to 2^-24 of the largest one.
     slack: f64,
+    /// Once set, [`Cloud::map_neighbourhoods_at`] skips the blocks it has not begun (see
+    /// [`Cloud::cancelled_by`]).
+    cancel: Option<crate::cancel::Cancel>,
 }
 
 /// The f32 radius that surely finds every point within `r` (in f64) of a query, given the
@@ -115,7 +118,15 @@ impl Cloud {
         let pos: Vec<DVec3> = ids.iter().map(|&i| world[i as usize] - origin).collect();
         let gid: Vec<u64> = ids.iter().map(|&i| gids[i as usize]).collect();
         let slack = rounding_slack(pos.iter().fold(0.0f64, |m, p| m.max(p.abs().max_element())));
-        Cloud { origin, pos, ids, gid, index: std::sync::OnceLock::new(), parallel, cells, rank: std::sync::OnceLock::new(), slack }
+        Cloud { origin, pos, ids, gid, index: std::sync::OnceLock::new(), parallel, cells, rank: std::sync::OnceLock::new(), slack, cancel: None }
+    }
+
+    /// The cloud, whose neighbourhood passes stop within a block of `cancel` being set: the
+    /// blocks not begun then give `T::default()`, and the caller, which sees the flag, must
+    /// discard the result. (A tile's pass takes seconds; a block, milliseconds.)
+    pub fn cancelled_by(mut self, cancel: &crate::cancel::Cancel) -> Cloud {
+        self.cancel = Some(cancel.clone());
+        self
     }
 
     /// The k-d tree over the points (built on first use: call it outside a parallel section
@@ -339,7 +350,7 @@ impl Cloud {
     /// Runs `f` on the neighbourhood (as [`Cloud::neighbours_in`] gives it) of every point in
     /// `which`, in parallel, returning the results in the order of `which` (see
     /// [`Cloud::map_neighbourhoods_at`]).
-    pub fn map_neighbourhoods<T: Send, S>(
+    pub fn map_neighbourhoods<T: Send + Default, S>(
         &self,
         which: &[u32],
         nb: Neighbourhood,
@@ -386,7 +397,7 @@ impl Cloud {
     /// tree query), then each position's ball is cut from that list; a sparse ball is widened
     /// from a second, wider list of the block (gathered once, for the first that needs it).
     /// This gives the same sets as a query per position at a fraction of the cost.
-    pub fn map_neighbourhoods_at<T: Send, S>(
+    pub fn map_neighbourhoods_at<T: Send + Default, S>(
         &self,
         at: &[DVec3],
         nb: Neighbourhood,
@@ -413,6 +424,9 @@ impl Cloud {
             .map_init(
                 || (init(), Vec::new(), Coords::default(), Vec::new(), Vec::new(), (Vec::new(), Coords::default())),
                 |(state, block, bpos, out, d2s, (wide, wpos)), chunk| {
+                    if self.cancel.as_ref().is_some_and(|c| c.is_set()) {
+                        return chunk.iter().map(|&(_, k)| (k, T::default())).collect::<Vec<_>>();
+                    }
                     let c = chunk.iter().map(|o| at[o.1 as usize]).sum::<DVec3>() / chunk.len() as f64;
                     let b = chunk.iter().map(|o| at[o.1 as usize].distance(c)).fold(0.0, f64::max);
                     // (A grid holds every block's points; a tree query for a wide block would

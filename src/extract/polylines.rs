@@ -106,8 +106,8 @@ pub struct Traced {
 }
 
 /// Stages 4 and 5 on the whole smoothed edge cloud (positions relative to `origin`), in any
-/// order: polyline growing and completion.
-pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3, r: &Resolved, debug: &DebugDump) -> Traced {
+/// order: polyline growing and completion. Once `cancel` is set, what comes back is partial.
+pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3, r: &Resolved, debug: &DebugDump, cancel: &crate::cancel::Cancel) -> Traced {
     // Sorted first, so the result does not depend on the order the points arrive in. (The
     // edge cloud is the one part of a run that grows with the whole input, not with a tile:
     // it is reordered through a permutation rather than as records, so that at most one
@@ -128,12 +128,15 @@ pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3,
     debug.points("corners.obj", grouped, origin);
     let t = Instant::now();
     let index = (!points.is_empty()).then(|| Index::new_parallel(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
-    let grown = index.as_ref().map_or(vec![], |ix| grow::grow(&points, ix, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg }));
+    let grown = index.as_ref().map_or(vec![], |ix| grow::grow(&points, ix, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg }, cancel));
     if debug.on() {
         let pl: Vec<Polyline> = grown.iter().enumerate().map(|(i, g)| Polyline::from_points(i as u32, g.vertices.iter().map(|p| *p + origin))).collect();
         debug.polylines("grown.obj", &pl);
     }
     let mut traced = Traced { grown: grown.len() as u64, growing_seconds: t.elapsed().as_secs_f64(), ..Default::default() };
+    if cancel.is_set() {
+        return traced;
+    }
     let t = Instant::now();
     let cp = complete::CompleteParams {
         step: r.step,

@@ -439,7 +439,7 @@ impl<'a> Run<'a> {
             &self.context(),
             "residuals",
             &self.tiles,
-            |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle),
+            |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle, &self.opts.cancel),
             |_, (cloud, core)| Ok(Residuals(candidates::tile_residuals(&cloud, &core, r))),
         )?;
         self.pass.residuals_load = time.load;
@@ -464,7 +464,7 @@ impl<'a> Run<'a> {
             &self.context(),
             "projection",
             &self.tiles,
-            |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle),
+            |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle, &self.opts.cancel),
             |t, (cloud, core)| {
                 let res = records::read::<Residuals>(&self.ws, t)?.0;
                 let cand = candidates::tile_candidates(&cloud, &core, &res, tau);
@@ -524,7 +524,8 @@ impl<'a> Run<'a> {
             smoothing: t.elapsed().as_secs_f64(),
             ..Default::default()
         };
-        let traced = polylines::grow_and_complete(smoothed, &grouped, origin, r, &self.opts.debug);
+        let traced = polylines::grow_and_complete(smoothed, &grouped, origin, r, &self.opts.debug, &self.opts.cancel);
+        self.opts.cancel.check()?;
         (counts.grown, counts.curves) = (traced.grown, traced.curves.len() as u64);
         (seconds.growing, seconds.completion) = (traced.growing_seconds, traced.completion_seconds);
         self.pass.curves = t.elapsed().as_secs_f64();

@@ -77,9 +77,11 @@ pub fn tile_pass<T: Send, R: Record>(
             let t0 = Instant::now();
             let out = compute(t, x?)?;
             time.compute += t0.elapsed().as_secs_f64();
+            // (Checked before the result is stored: a computation cancelled part way gives
+            // placeholders for the work it skipped.)
+            cancel.check()?;
             records::write(cx.ws, t, &out)?;
             bar.inc(1);
-            cancel.check()?;
         }
         // (A loader that panicked ended the loop early: its tiles have no result.)
         loader.join().map_err(|p| Error::panic("tile loader", p))
@@ -125,8 +127,8 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
 /// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells of side `side`, on
 /// the rayon pool if `idle` says that the pool has nothing else to do (the same cloud either
 /// way).
-pub fn load_cloud(store: Store, grid: &Grid, t: u32, l: &Loading, side: f64, idle: bool) -> Result<(Cloud, Vec<bool>)> {
+pub fn load_cloud(store: Store, grid: &Grid, t: u32, l: &Loading, side: f64, idle: bool, cancel: &Cancel) -> Result<(Cloud, Vec<bool>)> {
     let (tp, core) = load(store, grid, t, l)?;
     let origin = tile_origin(&tp);
-    Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, side, idle), core))
+    Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, side, idle).cancelled_by(cancel), core))
 }
