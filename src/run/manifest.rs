@@ -84,7 +84,7 @@ pub fn common_crs(headers: &[CloudHeader]) -> Result<Crs> {
     let known: Vec<&CloudHeader> = headers.iter().filter(|h| !h.crs.is_unknown()).collect();
     if let Some(first) = known.first() {
         for h in &known[1..] {
-            if h.crs != first.crs {
+            if !h.crs.agrees(&first.crs) {
                 return Err(Error::input(&h.path, format!("CRS {} differs from {} in {}", h.crs.summary(), first.crs.summary(), first.path.display())));
             }
         }
