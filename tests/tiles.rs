@@ -225,11 +225,13 @@ fn catalog_with_mixed_crs_is_refused() {
     assert!(e.contains("f1.las") && e.contains("CRS EPSG:2154 differs from EPSG:25832"), "{e}");
 }
 
-/// A damaged file in a run directory stops the next run with one line naming the file and
-/// what to do (a flipped byte in a tile's edge points once ended in 0 curves and exit 0);
-/// --force then starts over and gives the first run's outputs.
+/// A damaged file in a run directory is computed again where the run can (a tile's statistics,
+/// residuals or edge points: the re-run gives the first outputs and lists the file in
+/// `report.json`), and otherwise stops the run with one line naming the file and what to do (a
+/// flipped byte in a tile's edge points once ended in 0 curves and exit 0); `--force` then
+/// starts over and gives the first run's outputs.
 #[test]
-fn damaged_run_directory_files_are_named() {
+fn damaged_run_directory_files_are_repaired_or_named() {
     let d = tempfile::tempdir().unwrap();
     let input = fixture("cube.las");
     let out = d.path().join("run");
@@ -238,27 +240,38 @@ fn damaged_run_directory_files_are_named() {
         c.args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", "0.5", "-q"]).args(extra);
         c.output().unwrap()
     };
-    assert!(run(&[]).status.success());
-    let expect = outputs(&out);
-    for (file, offset) in [("edges/0.bin", 40), ("resid/0.bin", 40), ("stats/0.bin", 20), ("tiles/0.pts", 70), ("manifest.json", 0)] {
+    let flip = |file: &str, offset: usize| {
         let path = out.join(file);
         let mut bytes = std::fs::read(&path).unwrap();
         bytes[offset] ^= 0x5A;
         std::fs::write(&path, &bytes).unwrap();
-        // (The statistics and the tile store are read again only by a run that needs them.)
-        if file.starts_with("stats") || file.starts_with("tiles") {
-            std::fs::remove_file(out.join("manifest.json")).unwrap();
-            assert!(run(&[]).status.success(), "a new run replaces {file}");
-            continue;
-        }
+        path
+    };
+    assert!(run(&[]).status.success());
+    let expect = outputs(&out);
+    for (file, offset) in [("edges/0.bin", 40), ("resid/0.bin", 40), ("edges/3.bin", 8)] {
+        let path = flip(file, offset);
+        let o = run(&[]);
+        assert!(o.status.success(), "{file}: {}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(outputs(&out), expect, "{file}: the repaired run gives the first outputs");
+        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+        assert_eq!(report["repaired"], serde_json::json!([path]), "{file}");
+    }
+    // What cannot be computed again is named: the manifest, and a tile's points once a pass
+    // needs them (its edge points removed).
+    let named = |path: &Path| {
         let o = run(&[]);
         let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(2), "{file}: {err}");
-        assert_eq!(err.lines().count(), 1, "{file}: {err}");
-        assert!(err.contains(&format!("{}: damaged run directory file", path.display())) && err.contains("--force"), "{file}: {err}");
+        assert_eq!(o.status.code(), Some(2), "{}: {err}", path.display());
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.contains(&format!("{}: damaged run directory file", path.display())) && err.contains("--force"), "{err}");
         assert!(run(&["--force"]).status.success());
-        assert_eq!(outputs(&out), expect, "{file}: --force gives the same outputs");
-    }
+        assert_eq!(outputs(&out), expect, "{}: --force gives the same outputs", path.display());
+    };
+    let tile = flip("tiles/0.pts", 70);
+    std::fs::remove_file(out.join("edges/0.bin")).unwrap();
+    named(&tile);
+    named(&flip("manifest.json", 0));
 }
 
 /// Two runs on one directory: the second is refused at once, naming the first's process, and

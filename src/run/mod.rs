@@ -114,6 +114,8 @@ pub struct Report {
     pub halo: f64,
     /// True if this invocation continued an interrupted run.
     pub resumed: bool,
+    /// Per-tile results of an earlier invocation that were damaged, and were computed again.
+    pub repaired: Vec<PathBuf>,
 }
 
 /// Seconds per pass.
@@ -326,13 +328,36 @@ struct Run<'a> {
     points: u64,
     /// Peak memory by the end of the tile passes.
     peak_rss_tiles: u64,
+    /// Damaged results removed to be computed again.
+    repaired: Vec<PathBuf>,
 }
 
 impl<'a> Run<'a> {
     fn new(ws: Workspace, manifest: Manifest, opts: &'a RunOptions) -> Run<'a> {
         let kq = key_quantum(manifest.diag);
         let progress = Progress::new(opts.progress);
-        Run { ws, manifest, opts, progress, pass: PassSeconds::default(), tiles: vec![], kq, tau: 0.0, points: 0, peak_rss_tiles: 0 }
+        Run { ws, manifest, opts, progress, pass: PassSeconds::default(), tiles: vec![], kq, tau: 0.0, points: 0, peak_rss_tiles: 0, repaired: vec![] }
+    }
+
+    /// Checks the stored results of pass `R` (an earlier invocation's), and removes those that
+    /// are damaged, so that the pass computes them again from the tiles.
+    fn repair<R: Record>(&mut self) -> Result<()> {
+        let mut damaged = vec![];
+        for &t in &self.tiles {
+            if self.ws.exists(&records::name(R::DIR, t)) {
+                match records::read::<R>(&self.ws, t) {
+                    Ok(_) => {}
+                    Err(Error::Damaged { .. }) => damaged.push(t),
+                    Err(e) => return Err(e),
+                }
+            }
+        }
+        for t in damaged {
+            let name = records::name(R::DIR, t);
+            self.ws.remove(&name);
+            self.repaired.push(self.ws.path(&name));
+        }
+        Ok(())
     }
 
     fn context(&self) -> PassContext<'_> {
@@ -389,6 +414,7 @@ impl<'a> Run<'a> {
             self.pass.statistics = t.elapsed().as_secs_f64();
             return Ok(r.clone());
         }
+        self.repair::<Stats>()?;
         let (store, grid) = (Store::new(&self.ws)?, &self.manifest.grid);
         let tile_points = &self.manifest.tile_points;
         let fullest = *self.tiles.iter().max_by_key(|&&t| (tile_points[t as usize], std::cmp::Reverse(t))).expect("a tile with points");
@@ -434,6 +460,7 @@ impl<'a> Run<'a> {
     /// the same whatever the tiling), unless the user gave it.
     fn residuals(&mut self, r: &Resolved, params: &Params) -> Result<f64> {
         let t = Instant::now();
+        self.repair::<Residuals>()?;
         let (store, grid, loading) = (Store::new(&self.ws)?, &self.manifest.grid, self.cloud_loading(r));
         let time = tile_pass(
             &self.context(),
@@ -458,6 +485,7 @@ impl<'a> Run<'a> {
     /// Projection pass (stage 2): the candidates of each tile, projected.
     fn projection(&mut self, r: &Resolved) -> Result<()> {
         let t = Instant::now();
+        self.repair::<Edges>()?;
         let (store, grid, loading, tau) = (Store::new(&self.ws)?, &self.manifest.grid, self.cloud_loading(r), self.tau);
         let debug = &self.opts.debug;
         let time = tile_pass(
@@ -603,6 +631,7 @@ impl<'a> Run<'a> {
             tiles: grid.len(),
             tile_size: grid.size,
             resumed,
+            repaired: self.repaired.clone(),
         }
     }
 }
