@@ -147,6 +147,11 @@ impl<'a> Store<'a> {
         format!("{DIR}/{t}.pts")
     }
 
+    /// The path of tile `t`'s file (for messages).
+    pub fn path(&self, t: u32) -> std::path::PathBuf {
+        self.ws.path(&Self::name(t))
+    }
+
     /// Removes every tile's points.
     pub fn clear(&self) -> Result<()> {
         self.ws.remove(DIR);
@@ -177,17 +182,20 @@ impl<'a> Store<'a> {
         self.ws.sync_dir(DIR)
     }
 
-    /// Streams tile `t`'s points in chunks, keeping those `keep` accepts.
-    pub fn read(&self, t: u32, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<()> {
+    /// Streams tile `t`'s points in chunks, keeping those `keep` accepts; returns how many
+    /// points the tile's file holds (kept or not).
+    pub fn read(&self, t: u32, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<u64> {
         self.read_near(t, None, out, keep)
     }
 
     /// As [`Store::read`], but only chunks whose bounding box comes within the given distance
-    /// of the given box are decompressed (a tile's halo needs only its neighbours' borders).
-    pub fn read_near(&self, t: u32, near: Option<(&Bounds, f64)>, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<()> {
+    /// of the given box are decompressed (a tile's halo needs only its neighbours' borders);
+    /// returns how many points the chunks read hold.
+    pub fn read_near(&self, t: u32, near: Option<(&Bounds, f64)>, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<u64> {
         let name = Self::name(t);
         let path = self.ws.path(&name);
-        let Some(mut f) = self.ws.open(&name)? else { return Ok(()) };
+        let Some(mut f) = self.ws.open(&name)? else { return Ok(0) };
+        let mut read = 0u64;
         let truncated = |_| Error::damaged(&path, "truncated tile store");
         let mut head = [0u8; codec::HEADER];
         let (mut meta, mut z) = (Vec::new(), Vec::new());
@@ -218,6 +226,7 @@ impl<'a> Store<'a> {
                 return Err(Error::damaged(&path, "tile frame of the wrong length"));
             }
             let raw = h.open(&meta, &z, &path, &mut zd)?;
+            read += n as u64;
             let f64_at = |o: usize| f64::from_le_bytes(raw[o..o + 8].try_into().unwrap());
             for i in 0..n {
                 let p = DVec3::new(f64_at(8 * i), f64_at(8 * (n + i)), f64_at(8 * (2 * n + i)));
@@ -228,7 +237,7 @@ impl<'a> Store<'a> {
                 }
             }
         }
-        Ok(())
+        Ok(read)
     }
 }
 

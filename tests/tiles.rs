@@ -271,6 +271,10 @@ fn damaged_run_directory_files_are_repaired_or_named() {
     let tile = flip("tiles/0.pts", 70);
     std::fs::remove_file(out.join("edges/0.bin")).unwrap();
     named(&tile);
+    // A deleted tile file: its points are not silently dropped.
+    std::fs::remove_file(out.join("tiles/1.pts")).unwrap();
+    std::fs::remove_file(out.join("edges/1.bin")).unwrap();
+    named(&out.join("tiles/1.pts"));
     named(&flip("manifest.json", 0));
 }
 

@@ -93,7 +93,7 @@ pub fn tile_pass<T: Send, R: Record>(
 
 /// How a tile is loaded: its halo, and the thinning of noisy clouds by position key.
 #[derive(Clone, Copy, Debug)]
-pub struct Loading {
+pub struct Loading<'a> {
     /// Halo width.
     pub halo: f64,
     /// Share of points kept (1: all).
@@ -102,6 +102,8 @@ pub struct Loading {
     pub seed: u64,
     /// Quantum of the position keys.
     pub key_quantum: f64,
+    /// Points bucketed into each tile: a tile's store must hold them all.
+    pub counts: &'a [u64],
 }
 
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by position key); the
@@ -115,7 +117,12 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
     for n in grid.around(t, halo) {
         let before = tp.xyz.len();
         if n == t {
-            store.read(n, &mut tp, |p, _| kept(p))?;
+            let held = store.read(n, &mut tp, |p, _| kept(p))?;
+            let bucketed = l.counts.get(t as usize).copied().unwrap_or(0);
+            if held != bucketed {
+                // (A deleted or truncated tile file once dropped its points without a word.)
+                return Err(Error::damaged(store.path(t), format!("holds {held} of the {bucketed} points bucketed into it")));
+            }
         } else {
             store.read_near(n, Some((&core, halo)), &mut tp, |p, _| within(&core, halo, p) && kept(p))?;
         }
