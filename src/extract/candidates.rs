@@ -57,10 +57,7 @@ pub struct TileResiduals {
 /// Stage 1 for one tile: the residual of every core point of `cloud` (`is_core` flags the
 /// points in the order the tile was loaded), with the parameters `r`.
 pub fn tile_residuals(cloud: &Cloud, is_core: &[bool], r: &Resolved) -> TileResiduals {
-    use rayon::prelude::*;
-    // (The per-point steps around the fits run on the pool too: serial, they left one core
-    // idle for a moment of every tile.)
-    let which: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| is_core[cloud.ids[i as usize] as usize]).collect();
+    let which = cloud.core_points(is_core);
     let residual = residuals(cloud, &which, r.fit_radius, r.halo(), r.noise_limited());
     TileResiduals { gid: which.iter().map(|&i| cloud.gid[i as usize]).collect(), residual }
 }
@@ -71,7 +68,7 @@ pub fn tile_candidates(cloud: &Cloud, is_core: &[bool], res: &TileResiduals, tau
     use rayon::prelude::*;
     // The core points' residuals, in the cloud's order as the residual pass wrote them (the
     // tile loads the same way in both passes); joined by global id if not.
-    let core: Vec<u32> = (0..cloud.len() as u32).into_par_iter().filter(|&i| is_core[cloud.ids[i as usize] as usize]).collect();
+    let core = cloud.core_points(is_core);
     let same_order = res.gid.len() == core.len() && res.gid.par_iter().zip(&core).all(|(&g, &i)| g == cloud.gid[i as usize]);
     if same_order {
         return core.iter().zip(&res.residual).filter(|(_, r)| r.is_candidate(tau)).map(|(&i, _)| i).collect();

@@ -129,6 +129,14 @@ impl Cloud {
         self
     }
 
+    /// The stored indices of the points that `is_core` (indexed by the caller's order, see
+    /// `ids`) flags as the tile's core, in stored order. (On the pool: serial, this left one
+    /// core idle for a moment of every tile.)
+    pub fn core_points(&self, is_core: &[bool]) -> Vec<u32> {
+        use rayon::prelude::*;
+        (0..self.len() as u32).into_par_iter().filter(|&i| is_core[self.ids[i as usize] as usize]).collect()
+    }
+
     /// The k-d tree over the points (built on first use: call it outside a parallel section
     /// to have a large tree built in parallel).
     pub fn index(&self) -> &Index {

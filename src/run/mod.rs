@@ -509,7 +509,7 @@ impl<'a> Run<'a> {
     }
 
     /// A tile's edge points, snapped, with its corners and counts.
-    fn tile_edges(&self, t: u32, q: f64) -> Result<crate::extract::TileEdges> {
+    fn stored_edges(&self, t: u32, q: f64) -> Result<crate::extract::TileEdges> {
         let mut e = records::read::<Edges>(&self.ws, t)?.0;
         for x in e.edges.iter_mut() {
             polylines::snap_edge(x, q);
@@ -530,7 +530,7 @@ impl<'a> Run<'a> {
         let mut boxes: Vec<(u32, DVec3, DVec3)> = vec![];
         let mut corners = vec![];
         for &t in &self.tiles {
-            let e = self.tile_edges(t, q)?;
+            let e = self.stored_edges(t, q)?;
             counts.candidates += e.candidates;
             counts.one_surface += e.one_surface;
             counts.edge_points += e.edges.len() as u64;
@@ -575,11 +575,11 @@ impl<'a> Run<'a> {
             // (Decoded on the pool, which waits for them: the tile's edge points, and those of
             // its neighbours within reach, in order.)
             let (own, context) = rayon::join(
-                || self.tile_edges(t, q),
+                || self.stored_edges(t, q),
                 || {
                     let near: Vec<u32> = boxes.iter().filter(|&&(u, ulo, uhi)| u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all()).map(|b| b.0).collect();
                     near.par_iter()
-                        .map(|&u| Ok(self.tile_edges(u, q)?.edges.into_iter().filter(|e| inside(e.p)).collect::<Vec<_>>()))
+                        .map(|&u| Ok(self.stored_edges(u, q)?.edges.into_iter().filter(|e| inside(e.p)).collect::<Vec<_>>()))
                         .collect::<Result<Vec<_>>>()
                 },
             );
