@@ -32,13 +32,13 @@ impl DebugDump {
                 format!("v {} {} {}\n", p.x, p.y, p.z)
             })
             .collect();
-        let _ = std::fs::write(dir.join(name), text);
+        let _ = std::fs::create_dir_all(dir).and_then(|_| std::fs::write(dir.join(name), text));
     }
 
     /// Writes polylines (world coordinates) to `name` as OBJ.
     pub fn polylines(&self, name: &str, curves: &[crate::curves::Polyline]) {
         if let Some(dir) = &self.dir {
-            let _ = crate::curves::write_obj(&dir.join(name), curves);
+            let _ = std::fs::create_dir_all(dir).is_ok().then(|| crate::curves::write_obj(&dir.join(name), curves));
         }
     }
 }

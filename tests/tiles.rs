@@ -367,3 +367,23 @@ fn an_interrupt_ends_a_tile_within_a_second() {
     assert!(args(&out).status().unwrap().success());
     assert_eq!(outputs(&out), outputs(&alone));
 }
+
+/// `--debug-dir` creates its directory and fills it; the report counts every input point, and
+/// separately the points the fits were evaluated at (fewer where a noisy cloud is thinned).
+#[test]
+fn debug_dumps_and_point_counts() {
+    let d = tempfile::tempdir().unwrap();
+    let (dir, dump, las) = (d.path().join("run"), d.path().join("not/yet/there"), d.path().join("cube.las"));
+    let synth = crease().args(["synth", "shape", "cube", "-n", "100000", "--noise", "0.01", "-o", las.to_str().unwrap()]).output().unwrap();
+    assert!(synth.status.success());
+    let out = crease().args(["extract", las.to_str().unwrap(), "-o", dir.to_str().unwrap(), "-q", "--debug-dir", dump.to_str().unwrap()]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for name in ["candidates_0.obj", "edges.obj", "smoothed.obj", "corners.obj", "grown.obj"] {
+        assert!(dump.join(name).is_file(), "{name} was not written");
+    }
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    let input = las::Reader::from_path(&las).unwrap().header().number_of_points();
+    assert_eq!(report["counts"]["points"].as_u64(), Some(input));
+    let evaluated = report["counts"]["evaluated"].as_u64().unwrap();
+    assert!(evaluated > 0 && evaluated < input, "{evaluated} of {input} evaluated: this noisy cloud should be thinned");
+}

@@ -36,6 +36,10 @@ use serde::{Deserialize, Serialize};
 pub struct Counts {
     /// Input points.
     pub points: u64,
+    /// Points at which stages 1-2 were evaluated (fewer than the input where a noisy cloud is
+    /// thinned, see [`Resolved::keep`]).
+    #[serde(default)]
+    pub evaluated: u64,
     /// Candidates (residual above tau).
     pub candidates: u64,
     /// Candidates dropped as outliers (one surface).

@@ -325,7 +325,7 @@ struct Run<'a> {
     /// The residual threshold.
     tau: f64,
     /// Points whose residuals tau averages.
-    points: u64,
+    evaluated: u64,
     /// Peak memory by the end of the tile passes.
     peak_rss_tiles: u64,
     /// Damaged results removed to be computed again.
@@ -336,7 +336,7 @@ impl<'a> Run<'a> {
     fn new(ws: Workspace, manifest: Manifest, opts: &'a RunOptions) -> Run<'a> {
         let kq = key_quantum(manifest.diag);
         let progress = Progress::new(opts.progress);
-        Run { ws, manifest, opts, progress, pass: PassSeconds::default(), tiles: vec![], kq, tau: 0.0, points: 0, peak_rss_tiles: 0, repaired: vec![] }
+        Run { ws, manifest, opts, progress, pass: PassSeconds::default(), tiles: vec![], kq, tau: 0.0, evaluated: 0, peak_rss_tiles: 0, repaired: vec![] }
     }
 
     /// Checks the stored results of pass `R` (an earlier invocation's), and removes those that
@@ -477,7 +477,7 @@ impl<'a> Run<'a> {
             .map(|&t| Ok(ResidualSum::of(records::read::<Residuals>(&self.ws, t)?.0.residual.iter().map(|x| x.value))))
             .collect::<Result<_>>()?;
         let total = sums.into_iter().fold(ResidualSum::default(), |a, b| a + b);
-        self.points = total.count();
+        self.evaluated = total.count();
         self.pass.residuals = t.elapsed().as_secs_f64();
         Ok(params.tau.unwrap_or(settle(total.mean())))
     }
@@ -526,7 +526,7 @@ impl<'a> Run<'a> {
         crate::mem::release_free_memory();
         let q = snap_quantum(r.kappa);
         // Bounds of each tile's edge points, and all corner points.
-        let mut counts = Counts { points: self.points, ..Default::default() };
+        let mut counts = Counts { points: self.manifest.tile_points.iter().sum(), evaluated: self.evaluated, ..Default::default() };
         let mut boxes: Vec<(u32, DVec3, DVec3)> = vec![];
         let mut corners = vec![];
         for &t in &self.tiles {
