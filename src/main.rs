@@ -263,6 +263,10 @@ enum SynthCmd {
         /// Random seed.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Add clutter: a tree by the road of every block (volumetric scatter), a strip of rough
+        /// grass, and recessed windows (whose edges are truth; trees and grass have none).
+        #[arg(long)]
+        clutter: bool,
         /// Output LAS file; truth goes to OUT.truth.obj.
         #[arg(short)]
         o: PathBuf,
@@ -442,8 +446,8 @@ fn synth_cmd(what: SynthCmd) -> Result<(), Error> {
             let n = synth::write_sampled(&mesh.to_shape(angle), &sample.options()?, &sample.o)?;
             (sample.o, n as u64)
         }
-        SynthCmd::Scene { n, noise, seed, o } => {
-            let n = synth::scene::write_scene(&synth::scene::SceneOptions { n, noise, seed }, &o)?;
+        SynthCmd::Scene { n, noise, seed, clutter, o } => {
+            let n = synth::scene::write_scene(&synth::scene::SceneOptions { n, noise, seed, clutter }, &o)?;
             (o, n)
         }
     };

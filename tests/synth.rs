@@ -154,7 +154,7 @@ fn mesh_truth_is_exactly_the_sharp_edges() {
 fn scene_is_exact_in_count_and_carries_crs() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("scene.las");
-    let n = synth::scene::write_scene(&synth::scene::SceneOptions { n: 300_000, noise: 0.005, seed: 4 }, &out).unwrap();
+    let n = synth::scene::write_scene(&synth::scene::SceneOptions { n: 300_000, noise: 0.005, seed: 4, clutter: false }, &out).unwrap();
     assert_eq!(n, 300_000);
     let h = read_header(&out).unwrap();
     assert_eq!(h.count, 300_000);

@@ -44,6 +44,10 @@ pub struct Counts {
     pub candidates: u64,
     /// Candidates dropped as outliers (one surface).
     pub one_surface: u64,
+    /// Candidates dropped as scatter: a surface through them fitted worse than the noise
+    /// allows (see [`project::SURFACE_NOISE`]).
+    #[serde(default)]
+    pub scattered: u64,
     /// Edge points after projection and culling.
     pub edge_points: u64,
     /// Corner points before grouping.

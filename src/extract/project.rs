@@ -54,6 +54,8 @@ pub struct ProjectParams {
     /// Measured noise (standard deviation about the local plane): a seed plane whose
     /// quantile residual is already at this floor ends the search for better seeds.
     pub noise: f64,
+    /// Largest RMS of a surface that meets another at an edge point (see [`SURFACE_NOISE`]).
+    pub max_rms: f64,
 }
 
 /// What projection made of one candidate.
@@ -65,6 +67,9 @@ pub struct Projected {
     pub corner: Option<CornerPoint>,
     /// Number of surfaces found.
     pub surfaces: u8,
+    /// True if two surfaces met here but one of them fitted its points worse than a surface
+    /// does (see [`SURFACE_NOISE`]): scatter, such as vegetation, not an edge.
+    pub scattered: bool,
 }
 
 /// Most neighbours one robust fit looks at: the nearest this many of the ball. A noisy cloud
@@ -128,6 +133,12 @@ const CREASE_SPLIT_DEG: f64 = 20.0;
 /// few points were left at high noise (chamfer 0.02 dB recall 0.94-0.95 -> 0.89-0.92). On ten noisy
 /// clouds at two seeds, 0.5 gave the best precision and mean distance of 0, 0.5 and 1.
 const CORE_FRACTION: f64 = 0.5;
+/// An edge point is kept only where both of its surfaces fit their points to within this many
+/// noise deviations (RMS), or a quarter of the length scale on a clean cloud. Volumetric
+/// scatter (tree crowns, hedges) splits into "surfaces" as readily as a solid does, but none
+/// of them fits: their RMS is the scatter's thickness within the ball, tens of noise
+/// deviations.
+pub const SURFACE_NOISE: f64 = 4.0;
 /// Rounds of exclusive re-assignment and re-fitting.
 const REFINE_ROUNDS: usize = 5;
 /// Most surfaces looked for.
@@ -162,6 +173,9 @@ pub struct TileEdges {
     pub candidates: u64,
     /// Candidates that lay on one surface only (dropped as outliers).
     pub one_surface: u64,
+    /// Candidates between "surfaces" that fitted worse than the noise allows (dropped as
+    /// scatter, see [`SURFACE_NOISE`]).
+    pub scattered: u64,
 }
 
 /// Stage 2 for one tile: projects the `candidates` (indices into the tile's `cloud`) with the
@@ -171,14 +185,22 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges 
     // spacing), not by its id, so the same point gets the same stream in any file layout.
     let q = r.kappa / 4096.0;
     let ids: Vec<u64> = candidates.iter().map(|&i| position_key(cloud.at(i as usize) + cloud.origin, q)).collect();
-    let pp =
-        ProjectParams { radius: r.rmls_radius, reach: r.halo(), min_threshold: r.min_threshold, min_angle_deg: r.min_angle_deg, seed: r.seed, noise: r.noise };
+    let pp = ProjectParams {
+        radius: r.rmls_radius,
+        reach: r.halo(),
+        min_threshold: r.min_threshold,
+        min_angle_deg: r.min_angle_deg,
+        seed: r.seed,
+        noise: r.noise,
+        max_rms: (SURFACE_NOISE * r.noise).max(0.25 * r.scale),
+    };
     let projected = project(cloud, candidates, &ids, &pp);
     let one_surface = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
+    let scattered = projected.iter().filter(|x| x.scattered).count() as u64;
     let o = cloud.origin;
     let edges = projected.iter().filter_map(|x| x.edge).map(|e| WorldEdge { p: e.p + o, n: [e.n[0].as_vec3(), e.n[1].as_vec3()] }).collect();
     let corners = projected.iter().filter_map(|x| x.corner).map(|c| WorldCorner { p: c.p + o, w: c.w }).collect();
-    TileEdges { edges, corners, candidates: candidates.len() as u64, one_surface }
+    TileEdges { edges, corners, candidates: candidates.len() as u64, one_surface, scattered }
 }
 
 /// Projects every candidate (by index into `cloud`). `ids` gives each candidate a global
@@ -241,6 +263,11 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     let k = surfaces.len().min(3);
     let tol = 1e-7 * p.radius;
     refine(&mut surfaces[..k], &s.pts, x, p.min_threshold, tol);
+    // (A surface's threshold is three times its RMS, or the smallest threshold.)
+    if surfaces[..2].iter().any(|sf| sf.threshold > 3.0 * p.max_rms) {
+        out.scattered = true;
+        return out;
+    }
     let Some(e) = project_to_intersection(x, &surfaces[0].quad, &surfaces[1].quad, tol) else { return out };
     let reach = buf.iter().map(|&(_, d2)| (d2 as f64).sqrt()).fold(p.radius, f64::max);
     if e.distance(x) > reach {
@@ -583,7 +610,7 @@ mod tests {
         let cand: Vec<u32> = (0..cloud.len() as u32).filter(|&i| near(i)).collect();
         let ids: Vec<u64> = cand.iter().map(|&i| cloud.gid[i as usize]).collect();
         // (The deviation about a plane of a displacement uniform in a ball is radius / sqrt 5.)
-        let p = ProjectParams { radius, reach: f64::INFINITY, min_threshold: 1e-4, min_angle_deg: 28.0, seed: 1, noise: noise / 5f64.sqrt() };
+        let p = ProjectParams { radius, reach: f64::INFINITY, min_threshold: 1e-4, min_angle_deg: 28.0, seed: 1, noise: noise / 5f64.sqrt(), max_rms: (SURFACE_NOISE * noise / 5f64.sqrt()).max(1e-4) };
         let offsets: Vec<f64> = project(&cloud, &cand, &ids, &p).iter().filter_map(|o| o.edge).map(|e| (e.p + cloud.origin).dot(out_dir)).collect();
         (offsets.iter().sum::<f64>() / offsets.len() as f64, offsets.len())
     }
@@ -671,7 +698,7 @@ mod tests {
                 })
                 .collect();
             let ids: Vec<u64> = candidates.iter().map(|&i| i as u64).collect();
-            let p = ProjectParams { radius, reach: f64::INFINITY, min_threshold: 1e-4, min_angle_deg: 28.0, seed: 1, noise: noise / 5f64.sqrt() };
+            let p = ProjectParams { radius, reach: f64::INFINITY, min_threshold: 1e-4, min_angle_deg: 28.0, seed: 1, noise: noise / 5f64.sqrt(), max_rms: (SURFACE_NOISE * noise / 5f64.sqrt()).max(1e-4) };
             let out = project(&cloud, &candidates, &ids, &p);
             let split = out.iter().filter(|r| r.surfaces >= 3).count();
             assert!(split * 50 < out.len(), "seed {seed}: {split} of {} candidates found the wall split in two", out.len());

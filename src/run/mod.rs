@@ -533,6 +533,7 @@ impl<'a> Run<'a> {
             let e = self.stored_edges(t, q)?;
             counts.candidates += e.candidates;
             counts.one_surface += e.one_surface;
+            counts.scattered += e.scattered;
             counts.edge_points += e.edges.len() as u64;
             counts.corner_points += e.corners.len() as u64;
             corners.extend(e.corners);

@@ -122,6 +122,7 @@ impl Record for Edges {
         let t = &self.0;
         w.u64(t.candidates);
         w.u64(t.one_surface);
+        w.u64(t.scattered);
         w.u64(t.edges.len() as u64);
         for e in &t.edges {
             e.p.to_array().iter().for_each(|&x| w.f64(x));
@@ -135,12 +136,12 @@ impl Record for Edges {
     }
 
     fn decode(r: &mut Reader) -> Result<Self> {
-        let (candidates, one_surface) = (r.u64()?, r.u64()?);
+        let (candidates, one_surface, scattered) = (r.u64()?, r.u64()?, r.u64()?);
         let n = r.count(48)?;
         let edges = (0..n).map(|_| Ok(WorldEdge { p: dvec3(r)?, n: [vec3(r)?, vec3(r)?] })).collect::<Result<_>>()?;
         let n = r.count(32)?;
         let corners = (0..n).map(|_| Ok(WorldCorner { p: dvec3(r)?, w: r.f64()? })).collect::<Result<_>>()?;
-        Ok(Edges(TileEdges { edges, corners, candidates, one_surface }))
+        Ok(Edges(TileEdges { edges, corners, candidates, one_surface, scattered }))
     }
 }
 
@@ -156,6 +157,7 @@ mod tests {
             corners: vec![WorldCorner { p: DVec3::new(-1.0, 0.5, 1e6), w: 7.5 }],
             candidates: 12,
             one_surface: 3,
+            scattered: 2,
         };
         write(&ws, 4, &Edges(edges.clone())).unwrap();
         assert_eq!(read::<Edges>(&ws, 4).unwrap().0, edges);

@@ -36,6 +36,61 @@ pub struct SceneOptions {
     pub noise: f64,
     /// Random seed.
     pub seed: u64,
+    /// Clutter: a tree crown and trunk (volumetric scatter, ASPRS class 5) by the road, a strip
+    /// of rough grass (bumps of a few centimetres) along the back of each block, and recessed
+    /// windows in the walls. The windows' edges are designed edges (truth); the trees and
+    /// the grass have none.
+    pub clutter: bool,
+}
+
+/// Recessed windows: width, height, depth, sill above each floor, and their spacing along a
+/// wall and between floors (metres).
+const WINDOW: (f64, f64, f64, f64, f64, f64) = (1.2, 1.4, 0.2, 1.0, 2.5, 3.0);
+/// Depth of the grass strip along the back of a block (metres).
+const GRASS: f64 = 1.8;
+
+/// Bumps of the grass strip (local x along the block, y across the strip): a few centimetres,
+/// tapering to flat at both edges so the grass meets the pavement and the next block's curb
+/// without a step.
+fn grass_height(p: DVec2) -> f64 {
+    let taper = (std::f64::consts::PI * p.y / GRASS).sin().powi(2);
+    0.02 * taper * ((7.3 * p.x).sin() * (5.1 * p.y).sin() + 0.6 * (13.7 * p.x + 2.1 * p.y).sin())
+}
+
+/// A wall from `a` to `b` (feet at height `zb`, top at `ze`) with recessed windows: the wall
+/// with the openings cut out, each opening's four reveals and back, and the truth edges of
+/// the openings (rim and back).
+fn windowed_wall(a: DVec3, b: DVec3, zb: f64, ze: f64, s: &mut Vec<(Surface, u8)>, t: &mut Vec<Vec<DVec3>>) {
+    let (ww, wh, depth, sill, along, floor) = WINDOW;
+    let len = (b - a).length();
+    let x = (b - a) / len;
+    let inward = -x.cross(DVec3::Z);
+    let frame = Frame { origin: DVec3::new(a.x, a.y, zb), x, y: DVec3::Z };
+    let (columns, floors) = (((len - 1.0) / along).floor() as usize, ((ze - zb - 1.0) / floor).floor() as usize);
+    let margin = (len - columns as f64 * along) / 2.0;
+    let mut loops = vec![vec![DVec2::ZERO, DVec2::new(len, 0.0), DVec2::new(len, ze - zb), DVec2::new(0.0, ze - zb)]];
+    for f in 0..floors {
+        for c in 0..columns {
+            let lo = DVec2::new(margin + c as f64 * along + (along - ww) / 2.0, f as f64 * floor + sill);
+            let hi = lo + DVec2::new(ww, wh);
+            let rim = [lo, DVec2::new(hi.x, lo.y), hi, DVec2::new(lo.x, hi.y)];
+            loops.push(rim.to_vec());
+            let front: Vec<DVec3> = rim.iter().map(|&q| frame.at(q)).collect();
+            let back: Vec<DVec3> = front.iter().map(|&q| q + inward * depth).collect();
+            for k in 0..4 {
+                let l = (k + 1) % 4;
+                for r in rect(front[k], front[l], back[l], back[k]) {
+                    s.push((r, 6));
+                }
+            }
+            for r in rect(back[0], back[1], back[2], back[3]) {
+                s.push((r, 6));
+            }
+            t.push(front.iter().chain(&front[..1]).copied().collect());
+            t.push(back.iter().chain(&back[..1]).copied().collect());
+        }
+    }
+    s.push((Surface::Polygon { frame, loops }, 6));
 }
 
 struct Block {
@@ -48,7 +103,7 @@ fn rect(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> [Surface; 2] {
 }
 
 /// The surfaces (with ASPRS class) and edges of block (i, j), in scene-local coordinates.
-fn block(i: usize, j: usize, seed: u64, g: usize) -> Block {
+fn block(i: usize, j: usize, seed: u64, g: usize, clutter: bool) -> Block {
     let mut rng = Rng::stream(seed, (j * g + i) as u64);
     let o = DVec3::new(i as f64 * BLOCK, j as f64 * BLOCK, 0.0);
     let p = |x: f64, y: f64, z: f64| o + DVec3::new(x, y, z);
@@ -76,11 +131,12 @@ fn block(i: usize, j: usize, seed: u64, g: usize) -> Block {
     let gabled = rng.f64() < 0.5;
     let zb = CURB;
     let ze = zb + h;
-    // Pavement with the footprint cut out.
+    // Pavement with the footprint cut out (and the grass strip, with clutter).
+    let back = if clutter { BLOCK - GRASS } else { BLOCK };
     let pavement = Surface::Polygon {
         frame: Frame { origin: p(0.0, 0.0, CURB), x: DVec3::X, y: DVec3::Y },
         loops: vec![
-            vec![DVec2::new(0.0, ROAD), DVec2::new(BLOCK, ROAD), DVec2::new(BLOCK, BLOCK), DVec2::new(0.0, BLOCK)],
+            vec![DVec2::new(0.0, ROAD), DVec2::new(BLOCK, ROAD), DVec2::new(BLOCK, back), DVec2::new(0.0, back)],
             vec![DVec2::new(x0, y0), DVec2::new(x1, y0), DVec2::new(x1, y1), DVec2::new(x0, y1)],
         ],
     };
@@ -90,8 +146,12 @@ fn block(i: usize, j: usize, seed: u64, g: usize) -> Block {
     // Walls, wall corners and wall feet.
     for k in 0..4 {
         let (a, b) = (c[k], c[(k + 1) % 4]);
-        for r in rect(up(a, zb), up(b, zb), up(b, ze), up(a, ze)) {
-            s.push((r, 6));
+        if clutter {
+            windowed_wall(a, b, zb, ze, &mut s, &mut t);
+        } else {
+            for r in rect(up(a, zb), up(b, zb), up(b, ze), up(a, ze)) {
+                s.push((r, 6));
+            }
         }
         t.push(vec![up(a, zb), up(a, ze)]);
         t.push(vec![up(a, zb), up(b, zb)]);
@@ -123,6 +183,16 @@ fn block(i: usize, j: usize, seed: u64, g: usize) -> Block {
             t.push(vec![up(c[k], ze), up(c[(k + 1) % 4], ze)]);
         }
     }
+    if clutter {
+        // (From a stream of its own, so that the rest of the block is the scene without clutter.)
+        let mut rng = Rng::stream(seed ^ 0xC1A7, (j * g + i) as u64);
+        let grass = Frame { origin: p(0.0, BLOCK - GRASS, CURB), x: DVec3::X, y: DVec3::Y };
+        s.push((Surface::HeightField { frame: grass, min: DVec2::ZERO, max: DVec2::new(BLOCK, GRASS), f: grass_height, max_slope: 0.6 }, 2));
+        let (tx, crown) = (rng.range(3.0, BLOCK - 3.0), rng.range(2.0, 3.0));
+        let trunk = rng.range(2.0, 3.5);
+        s.push((Surface::Scatter { centre: p(tx, ROAD + 1.0, CURB + trunk / 2.0), radii: DVec3::new(0.3, 0.3, trunk / 2.0) }, 5));
+        s.push((Surface::Scatter { centre: p(tx, ROAD + 1.0, CURB + trunk + 0.8 * crown), radii: DVec3::new(crown, crown, 0.8 * crown) }, 5));
+    }
     Block { surfaces: s, truth: t }
 }
 
@@ -144,7 +214,7 @@ pub fn write_scene(opts: &SceneOptions, out: &Path) -> Result<u64> {
     }
     let g = grid_side(opts.n);
     // First pass: areas only, to give every block its exact share of the n points.
-    let areas: Vec<f64> = (0..g * g).map(|k| block_area(&block(k % g, k / g, opts.seed, g))).collect();
+    let areas: Vec<f64> = (0..g * g).map(|k| block_area(&block(k % g, k / g, opts.seed, g, opts.clutter))).collect();
     let total: f64 = areas.iter().sum();
     let wopts = WriteOptions { scale: 0.001, offset: ORIGIN, epsg: Some(EPSG) };
     let mut w = PointWriter::create(out, &wopts)?;
@@ -157,7 +227,7 @@ pub fn write_scene(opts: &SceneOptions, out: &Path) -> Result<u64> {
         cum += area;
         let target = ((cum / total) * opts.n as f64).round() as u64;
         let count = (target - written) as usize;
-        let b = block(i, j, opts.seed, g);
+        let b = block(i, j, opts.seed, g, opts.clutter);
         let surfaces: Vec<Surface> = b.surfaces.iter().map(|(s, _)| s.clone()).collect();
         let table = AreaTable::new(&surfaces);
         let mut rng = Rng::stream(opts.seed ^ 0xB10C, k as u64);

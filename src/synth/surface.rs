@@ -1,5 +1,5 @@
 //! Surfaces that can be sampled uniformly by area: triangles, planar polygons with holes
-//! (sampled by rejection) and height fields. Curved CAD faces are fine strips of triangles.
+//! (sampled by rejection), height fields, and volumetric scatter (clutter). Curved CAD faces are fine strips of triangles.
 
 use crate::rng::Rng;
 use glam::{DVec2, DVec3};
@@ -46,6 +46,14 @@ pub enum Surface {
         f: fn(DVec2) -> f64,
         /// An upper bound of |grad f|.
         max_slope: f64,
+    },
+    /// Points scattered through the volume of an ellipsoid (a tree crown: clutter, no surface).
+    /// Its "area", which sets its share of the points, is that of a sphere of its mean radius.
+    Scatter {
+        /// Centre.
+        centre: DVec3,
+        /// Semi-axes along x, y and z.
+        radii: DVec3,
     },
 }
 
@@ -101,6 +109,7 @@ impl Surface {
                 }
                 s * d.x * d.y
             }
+            Surface::Scatter { radii, .. } => 4.0 * std::f64::consts::PI * (radii.element_sum() / 3.0).powi(2),
         }
     }
 
@@ -134,6 +143,7 @@ impl Surface {
                     }
                 }
             }
+            Surface::Scatter { centre, radii } => *centre + *radii * rng.in_ball(1.0),
         }
     }
 }
