@@ -140,6 +140,14 @@ enum Cmd {
         /// the environment variable CREASE_DEBUG_DIR).
         #[arg(long)]
         debug_dir: Option<PathBuf>,
+        /// Leave out curves whose confidence (0 to 1, written to every output) is below this:
+        /// higher trades recall for precision. Changing it on a finished run rewrites the
+        /// outputs without recomputing the tiles.
+        #[arg(long, default_value_t = crease::extract::polylines::DEFAULT_MIN_CONFIDENCE)]
+        min_confidence: f64,
+        /// Leave out curves shorter than this, in model units.
+        #[arg(long, default_value_t = 0.0)]
+        min_length: f64,
     },
     /// Tells what a run directory has done and what is left.
     Status {
@@ -343,8 +351,8 @@ fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Cmd::Synth { what } => synth_cmd(what)?,
-        Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir } => {
-            let args = ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir };
+        Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length } => {
+            let args = ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length };
             extract_cmd(args)?
         }
         Cmd::Status { dir, json } => {
@@ -372,10 +380,18 @@ struct ExtractArgs {
     per_file: bool,
     quiet: bool,
     debug_dir: Option<PathBuf>,
+    min_confidence: f64,
+    min_length: f64,
 }
 
 fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
-    let ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir } = a;
+    let ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length } = a;
+    if !(0.0..=1.0).contains(&min_confidence) {
+        return Err(Error::Usage("--min-confidence must be between 0 and 1".into()));
+    }
+    if !(min_length >= 0.0 && min_length.is_finite()) {
+        return Err(Error::Usage("--min-length must be a length of 0 or more".into()));
+    }
     if let Some(n) = threads {
         rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
     }
@@ -397,6 +413,8 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         progress: if quiet { crease::progress::Mode::Quiet } else { crease::progress::Mode::Auto },
         cancel,
         debug: crease::debug::DebugDump::new(debug_dir.or_else(|| std::env::var_os("CREASE_DEBUG_DIR").map(PathBuf::from))),
+        min_confidence,
+        min_length,
     };
     let params = params.params()?;
     let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {

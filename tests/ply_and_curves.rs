@@ -88,6 +88,7 @@ fn sample_curves() -> Vec<Polyline> {
                 Vertex { p: DVec3::new(1.1, 2.0, 3.000_000_000_1), n: [n(1.0, 0.1, 0.0), n(0.0, 1.0, 0.2)], corner: false },
                 Vertex { p: DVec3::new(1.0 / 3.0, 2.0, 1e7 + 0.123), n: [n(1.0, 0.0, 0.0), n(0.0, 1.0, 0.0)], corner: false },
             ],
+            confidence: 0.8125,
         },
         Polyline {
             id: 7,
@@ -97,6 +98,7 @@ fn sample_curves() -> Vec<Polyline> {
                 Vertex { p: DVec3::new(5.0, 5.0, 5.0), n: [n(0.0, 0.0, 1.0), n(0.0, 1.0, 0.0)], corner: false },
                 Vertex { p: DVec3::new(-5.0, 5.0, 0.5), n: [n(0.0, 0.0, 1.0), n(0.0, 1.0, 0.0)], corner: false },
             ],
+            confidence: 0.1,
         },
     ]
 }
@@ -121,6 +123,7 @@ fn obj_curves_round_trip_positions_ids_and_shared_corners() {
     for (a, b) in curves.iter().zip(&back) {
         assert_eq!(a.id, b.id);
         assert_eq!(a.closed, b.closed);
+        assert_eq!(a.confidence, b.confidence, "the confidence comment round-trips");
         let pa: Vec<DVec3> = a.vertices.iter().map(|v| v.p).collect();
         let pb: Vec<DVec3> = b.vertices.iter().map(|v| v.p).collect();
         assert_eq!(pa, pb, "positions must round-trip bit for bit");
@@ -146,4 +149,32 @@ fn geojson_carries_crs_and_coordinates() {
     assert_eq!(ring.len(), 4, "closed curve repeats its first vertex");
     assert_eq!(ring[0], ring[3]);
     assert_eq!(v["features"][0]["geometry"]["coordinates"][2][2], 1e7 + 0.123);
+    assert_eq!(v["features"][0]["properties"]["confidence"], 0.8125);
+}
+
+/// A curve PLY written before curves had a confidence (crease 0.4) still reads, each curve at
+/// confidence 1.
+#[test]
+fn ply_without_confidence_still_reads() {
+    let d = tempfile::tempdir().unwrap();
+    let p = d.path().join("c.ply");
+    let curves = sample_curves();
+    write_ply(&p, &curves).unwrap();
+    // Rewrite as the older layout: no confidence property, 4 bytes fewer a vertex.
+    let bytes = std::fs::read(&p).unwrap();
+    let end = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let head = String::from_utf8(bytes[..end].to_vec()).unwrap().replace("property float confidence\n", "");
+    let mut old = head.into_bytes();
+    let nv: usize = curves.iter().map(|c| c.vertices.len()).sum();
+    for v in 0..nv {
+        old.extend_from_slice(&bytes[end + v * 57..end + v * 57 + 53]);
+    }
+    old.extend_from_slice(&bytes[end + nv * 57..]);
+    std::fs::write(&p, old).unwrap();
+    let back = read_ply(&p).unwrap();
+    assert_eq!(back.len(), 2);
+    for (a, b) in curves.iter().zip(&back) {
+        assert_eq!((a.id, a.closed, &a.vertices), (b.id, b.closed, &b.vertices));
+        assert_eq!(b.confidence, 1.0);
+    }
 }

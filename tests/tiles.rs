@@ -387,3 +387,32 @@ fn debug_dumps_and_point_counts() {
     let evaluated = report["counts"]["evaluated"].as_u64().unwrap();
     assert!(evaluated > 0 && evaluated < input, "{evaluated} of {input} evaluated: this noisy cloud should be thinned");
 }
+
+/// `--min-confidence` and `--min-length` are output filters: on a finished run they rewrite the
+/// outputs from the stored tile results (the run resumes), and the report counts what they
+/// left out.
+#[test]
+fn output_filters_rewrite_a_finished_run() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("run");
+    let las = fixture("cube.las");
+    let run = |extra: &[&str]| -> serde_json::Value {
+        let out = crease().args(["extract", las.to_str().unwrap(), "-o", dir.to_str().unwrap(), "-q"]).args(extra).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap()
+    };
+    let first = run(&[]);
+    assert_eq!((first["counts"]["curves"].as_u64(), first["counts"]["left_out"].as_u64()), (Some(12), Some(0)));
+    let curves = read_obj(&dir.join("curves.obj")).unwrap();
+    assert!(curves.iter().all(|c| c.confidence > 0.5 && c.confidence < 1.0), "{:?}", curves.iter().map(|c| c.confidence).collect::<Vec<_>>());
+    let strict = run(&["--min-confidence", "1"]);
+    assert_eq!(strict["resumed"], true);
+    assert_eq!((strict["counts"]["curves"].as_u64(), strict["counts"]["left_out"].as_u64()), (Some(0), Some(12)));
+    assert!(read_obj(&dir.join("curves.obj")).unwrap().is_empty());
+    // The cube's edges are a little under 1 long.
+    let long = run(&["--min-length", "0.9"]);
+    let short = run(&["--min-length", "1.1"]);
+    assert_eq!((long["counts"]["curves"].as_u64(), short["counts"]["curves"].as_u64()), (Some(12), Some(0)));
+    let out = crease().args(["extract", las.to_str().unwrap(), "-o", dir.to_str().unwrap(), "--min-confidence", "2"]).output().unwrap();
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--min-confidence must be between 0 and 1"));
+}

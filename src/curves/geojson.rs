@@ -32,7 +32,7 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
             let corners: Vec<usize> = c.vertices.iter().enumerate().filter(|(_, v)| v.corner).map(|(i, _)| i).collect();
             json!({
                 "type": "Feature",
-                "properties": {"id": c.id, "closed": c.closed, "length": c.length(), "corners": corners},
+                "properties": {"id": c.id, "closed": c.closed, "length": c.length(), "confidence": c.confidence, "corners": corners},
                 "geometry": {"type": "LineString", "coordinates": coords},
             })
         })

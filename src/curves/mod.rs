@@ -38,12 +38,15 @@ pub struct Polyline {
     pub closed: bool,
     /// The vertices, in order.
     pub vertices: Vec<Vertex>,
+    /// How sure crease is that the curve is a feature of the surface, 0 to 1 (1 for curves
+    /// not extracted by crease).
+    pub confidence: f32,
 }
 
 impl Polyline {
     /// An open polyline through `points` with unknown normals.
     pub fn from_points(id: u32, points: impl IntoIterator<Item = DVec3>) -> Polyline {
-        Polyline { id, closed: false, vertices: points.into_iter().map(Vertex::at).collect() }
+        Polyline { id, closed: false, vertices: points.into_iter().map(Vertex::at).collect(), confidence: 1.0 }
     }
 
     /// Number of segments (closing segment included).

@@ -1,4 +1,5 @@
-//! Wavefront OBJ polylines: `v x y z` vertices and `l i j k ...` lines, one `o` per curve.
+//! Wavefront OBJ polylines: `v x y z` vertices and `l i j k ...` lines, one `o` per curve, with
+//! the curve's confidence in a `# confidence c` comment after it (other readers skip it).
 //! Corner vertices shared by several curves are written once and referenced by each.
 
 use super::{Polyline, Vertex};
@@ -58,6 +59,7 @@ fn write_obj_to(w: &mut impl Write, curves: &[Polyline]) -> std::io::Result<()> 
     }
     for (c, idx) in curves.iter().zip(&lines) {
         writeln!(w, "o curve_{}", c.id)?;
+        writeln!(w, "# confidence {}", c.confidence)?;
         write!(w, "l")?;
         for i in idx {
             write!(w, " {i}")?;
@@ -73,8 +75,9 @@ fn write_obj_to(w: &mut impl Write, curves: &[Polyline]) -> std::io::Result<()> 
 pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
     let f = std::fs::File::open(path).map_err(|e| io_input(path, e))?;
     let mut verts: Vec<DVec3> = Vec::new();
-    let mut lines: Vec<(Option<u32>, Vec<usize>)> = Vec::new();
+    let mut lines: Vec<(Option<u32>, f32, Vec<usize>)> = Vec::new();
     let mut pending_id: Option<u32> = None;
+    let mut pending_confidence = 1.0;
     for (no, line) in BufReader::new(f).lines().enumerate() {
         let line = line.map_err(|e| io_input(path, e))?;
         let mut t = line.split_whitespace();
@@ -90,6 +93,9 @@ pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
             Some("o") | Some("g") => {
                 pending_id = t.next().and_then(|n| n.strip_prefix("curve_")).and_then(|s| s.parse().ok());
             }
+            Some("#") if t.next() == Some("confidence") => {
+                pending_confidence = t.next().and_then(|s| s.parse().ok()).filter(|c: &f32| c.is_finite()).ok_or_else(|| bad("bad confidence"))?;
+            }
             Some("l") => {
                 let mut idx = Vec::new();
                 for s in t {
@@ -102,13 +108,13 @@ pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
                     }
                     idx.push(i as usize);
                 }
-                lines.push((pending_id.take(), idx));
+                lines.push((pending_id.take(), std::mem::replace(&mut pending_confidence, 1.0), idx));
             }
             _ => {}
         }
     }
     let mut uses = vec![0u32; verts.len()];
-    for (_, idx) in &lines {
+    for (_, _, idx) in &lines {
         let n = idx.len();
         let closed = n > 2 && idx[0] == idx[n - 1];
         let end = if closed { n - 1 } else { n };
@@ -120,13 +126,13 @@ pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
         }
     }
     let mut out = Vec::with_capacity(lines.len());
-    for (k, (id, mut idx)) in lines.into_iter().enumerate() {
+    for (k, (id, confidence, mut idx)) in lines.into_iter().enumerate() {
         let closed = idx.len() > 2 && idx[0] == idx[idx.len() - 1];
         if closed {
             idx.pop();
         }
         let vertices = idx.iter().map(|&i| Vertex { corner: uses[i] > 1, ..Vertex::at(verts[i]) }).collect();
-        out.push(Polyline { id: id.unwrap_or(k as u32), closed, vertices });
+        out.push(Polyline { id: id.unwrap_or(k as u32), closed, vertices, confidence });
     }
     Ok(out)
 }

@@ -1,6 +1,8 @@
 //! Binary PLY polylines: a `vertex` element (x, y, z as double; the two surface normals as
-//! float; curve id; corner flag) and an `edge` element (vertex1, vertex2). Each curve's vertices
-//! are stored in order; a closed curve has one more edge than an open one.
+//! float; curve id; corner flag; the curve's confidence as float) and an `edge` element
+//! (vertex1, vertex2). Each curve's vertices are stored in order; a closed curve has one more
+//! edge than an open one. (Files of crease 0.4 and earlier, without the confidence, are read
+//! too.)
 
 use super::{Polyline, Vertex};
 use crate::error::{io_input, Error, Result};
@@ -12,7 +14,8 @@ const HEADER: &str = "property double x\nproperty double y\nproperty double z\n\
 property float n1x\nproperty float n1y\nproperty float n1z\n\
 property float n2x\nproperty float n2y\nproperty float n2z\n\
 property int curve\nproperty uchar corner\n";
-const VERTEX_BYTES: usize = 3 * 8 + 6 * 4 + 4 + 1;
+const CONFIDENCE: &str = "property float confidence\n";
+const VERTEX_BYTES: usize = 3 * 8 + 6 * 4 + 4 + 1 + 4;
 
 /// Writes `curves` to `path` as binary little-endian PLY.
 pub fn write_ply(path: &Path, curves: &[Polyline]) -> Result<()> {
@@ -24,7 +27,7 @@ pub fn write_ply(path: &Path, curves: &[Polyline]) -> Result<()> {
         write!(
             w,
             "ply\nformat binary_little_endian 1.0\ncomment crease feature curves\n\
-             element vertex {nv}\n{HEADER}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n"
+             element vertex {nv}\n{HEADER}{CONFIDENCE}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n"
         )?;
         for c in curves {
             for v in &c.vertices {
@@ -38,6 +41,7 @@ pub fn write_ply(path: &Path, curves: &[Polyline]) -> Result<()> {
                 }
                 w.write_all(&(c.id as i32).to_le_bytes())?;
                 w.write_all(&[v.corner as u8])?;
+                w.write_all(&c.confidence.to_le_bytes())?;
             }
         }
         let mut base = 0i32;
@@ -70,8 +74,10 @@ pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
             .ok_or_else(|| bad("PLY header lacks an element count"))
     };
     let (nv, ne) = (count("vertex")?, count("edge")?);
+    let with_confidence = head.contains(&format!("{HEADER}{CONFIDENCE}"));
+    let vertex_bytes = if with_confidence { VERTEX_BYTES } else { VERTEX_BYTES - 4 };
     let body = &bytes[end + 11..];
-    if body.len() < nv * VERTEX_BYTES + ne * 8 {
+    if body.len() < nv * vertex_bytes + ne * 8 {
         return Err(bad("truncated PLY data"));
     }
     let f64_at = |o: usize| f64::from_le_bytes(body[o..o + 8].try_into().unwrap());
@@ -80,20 +86,21 @@ pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
     let mut curves: Vec<Polyline> = Vec::new();
     let mut first_vertex: Vec<usize> = Vec::new();
     for i in 0..nv {
-        let o = i * VERTEX_BYTES;
+        let o = i * vertex_bytes;
         let p = DVec3::new(f64_at(o), f64_at(o + 8), f64_at(o + 16));
         let n1 = Vec3::new(f32_at(o + 24), f32_at(o + 28), f32_at(o + 32));
         let n2 = Vec3::new(f32_at(o + 36), f32_at(o + 40), f32_at(o + 44));
         let id = i32_at(o + 48) as u32;
         let corner = body[o + 52] != 0;
+        let confidence = if with_confidence { f32_at(o + 53) } else { 1.0 };
         if curves.last().map(|c| c.id) != Some(id) {
-            curves.push(Polyline { id, closed: false, vertices: vec![] });
+            curves.push(Polyline { id, closed: false, vertices: vec![], confidence });
             first_vertex.push(i);
         }
         curves.last_mut().unwrap().vertices.push(Vertex { p, n: [n1, n2], corner });
     }
     // A closed curve's extra edge runs from its last vertex back to its first.
-    let eb = nv * VERTEX_BYTES;
+    let eb = nv * vertex_bytes;
     for e in 0..ne {
         let a = i32_at(eb + e * 8) as usize;
         let b = i32_at(eb + e * 8 + 4) as usize;

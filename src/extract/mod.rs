@@ -60,8 +60,11 @@ pub struct Counts {
     pub corners: u64,
     /// Polylines grown.
     pub grown: u64,
-    /// Curves after completion.
+    /// Curves written (after completion, less those left out).
     pub curves: u64,
+    /// Curves left out for confidence or length below `--min-confidence` or `--min-length`.
+    #[serde(default)]
+    pub left_out: u64,
 }
 
 /// Seconds per stage.

@@ -158,7 +158,7 @@ fn permute<T: Copy>(v: Vec<T>, perm: &[u32]) -> Vec<T> {
 }
 
 /// Attaches normals (from the nearest edge points, orientation carried along each curve) and
-/// converts to world coordinates.
+/// the evidence for each curve (see [`Evidence`]), and converts to world coordinates.
 fn to_polylines(curves: &[complete::Curve], index: Option<&Index>, edge_normals: &[[glam::Vec3; 2]], origin: DVec3, step: f64) -> Vec<Polyline> {
     let mut nn = Vec::new();
     curves
@@ -178,19 +178,22 @@ fn to_polylines(curves: &[complete::Curve], index: Option<&Index>, edge_normals:
                         ix.nearest_n(&p.as_vec3().to_array(), 1, &mut nn);
                     }
                 }
+                if nn.is_empty() {
+                    continue;
+                }
                 nn.sort_unstable_by_key(|a| a.0);
                 let mut acc = [DVec3::ZERO; 2];
                 let pair = |j: u32| edge_normals[j as usize].map(|v| v.as_dvec3());
+                let reference = prev.unwrap_or(pair(nn[0].0));
                 for &(j, _) in &nn {
-                    let n = pair(j);
-                    let reference = prev.unwrap_or(pair(nn[0].0));
-                    acc[0] += align(n, reference)[0];
-                    acc[1] += align(n, reference)[1];
+                    let n = align(pair(j), reference);
+                    acc[0] += n[0];
+                    acc[1] += n[1];
                 }
-                let pair = [acc[0].normalize_or_zero(), acc[1].normalize_or_zero()];
-                if pair[0] != DVec3::ZERO {
-                    normals[i] = pair;
-                    prev = Some(pair);
+                let mean = [acc[0].normalize_or_zero(), acc[1].normalize_or_zero()];
+                if mean[0] != DVec3::ZERO {
+                    normals[i] = mean;
+                    prev = Some(mean);
                 }
             }
             // Corners take the normals of their neighbour on the curve.
@@ -200,19 +203,100 @@ fn to_polylines(curves: &[complete::Curve], index: Option<&Index>, edge_normals:
                     normals[i] = normals[j];
                 }
             }
-            Polyline {
-                id: id as u32,
-                closed: c.closed,
-                vertices: c
-                    .v
-                    .iter()
+            let vertices: Vec<Vertex> =
+                c.v.iter()
                     .zip(&normals)
                     .zip(&c.corner)
                     .map(|((&p, n), &corner)| Vertex { p: p + origin, n: [n[0].as_vec3(), n[1].as_vec3()], corner })
-                    .collect(),
-            }
+                    .collect();
+            let mut line = Polyline { id: id as u32, closed: c.closed, vertices, confidence: 0.0 };
+            line.confidence = index.map_or(0.0, |ix| Evidence::along(&c.v, c.closed, ix, edge_normals, step).confidence() as f32);
+            line
         })
         .collect()
+}
+
+/// The length, in polyline steps, over which a curve's length term of confidence rises to 1 -
+/// 1/e (see [`Evidence::confidence`]): a curve of one step has 0.39 of it, of six steps 0.95.
+pub const CONFIDENT_STEPS: f64 = 2.0;
+/// Agreement of the edge points' normals (mean cosine to their mean) at which confidence is
+/// zero. On the noisy quality clouds, curves on the truth agree at 0.96-0.99 (quartiles), and
+/// the 5 % least agreeing at 0.90; on the real aerial scan autzen, half the curves fall below
+/// 0.93.
+pub const AGREEMENT_FLOOR: f64 = 0.7;
+/// Curves below this confidence are left out of the outputs by default (`--min-confidence`).
+/// Over 90 noisy extractions of the quality clouds (nine shapes, five noise levels), 0.2 left
+/// out 0.15 % of the length of curves on the truth and 1.1 % of the length of the others;
+/// confidence separates curves that follow no edge from those that do, not curves placed
+/// off an edge (most false length there), which it cannot see.
+pub const DEFAULT_MIN_CONFIDENCE: f64 = 0.2;
+
+/// What speaks for a curve being a feature of the surface: the edge points along it, looked
+/// at every half step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Evidence {
+    /// Length, in polyline steps.
+    pub length_steps: f64,
+    /// Share of the places looked at that have an edge point within half a step (the rest is
+    /// gaps that completion bridged).
+    pub coverage: f64,
+    /// How well the two normals of the edge points at a place agree with their mean, on
+    /// average (1: all the same; two surfaces fitted at random agree little).
+    pub agreement: f64,
+    /// Mean angle between the two surface normals, degrees.
+    pub angle_deg: f64,
+}
+
+impl Evidence {
+    /// The evidence along the curve through `v` (closed if `closed`), from the edge cloud
+    /// indexed by `index` with the normals `normals`, for polyline step `step`.
+    fn along(v: &[DVec3], closed: bool, index: &Index, normals: &[[glam::Vec3; 2]], step: f64) -> Evidence {
+        let mut places = vec![];
+        let n = v.len();
+        let segments = if closed && n > 2 { n } else { n.saturating_sub(1) };
+        let mut length = 0.0;
+        for k in 0..segments {
+            let (a, b) = (v[k], v[(k + 1) % n]);
+            let parts = ((b - a).length() / (0.5 * step)).ceil().max(1.0) as usize;
+            places.extend((0..parts).map(|i| a.lerp(b, i as f64 / parts as f64)));
+            length += (b - a).length();
+        }
+        if !closed || n <= 2 {
+            places.extend(v.last());
+        }
+        let (mut covered, mut agreement, mut angle) = (0usize, 0.0, 0.0);
+        let mut near = vec![];
+        for p in &places {
+            near.clear();
+            index.within(&p.as_vec3().to_array(), (0.5 * step) as f32, &mut near);
+            if near.is_empty() {
+                continue;
+            }
+            near.sort_unstable_by_key(|a| a.0);
+            let pair = |j: u32| normals[j as usize].map(|x| x.as_dvec3());
+            let reference = pair(near[0].0);
+            let sum = near.iter().fold([DVec3::ZERO; 2], |s, &(j, _)| {
+                let a = align(pair(j), reference);
+                [s[0] + a[0], s[1] + a[1]]
+            });
+            let mean = [sum[0].normalize_or_zero(), sum[1].normalize_or_zero()];
+            covered += 1;
+            agreement +=
+                near.iter().map(|&(j, _)| align(pair(j), mean)).map(|a| a[0].dot(mean[0]).min(a[1].dot(mean[1])).max(0.0)).sum::<f64>() / near.len() as f64;
+            angle += mean[0].dot(mean[1]).abs().min(1.0).acos().to_degrees();
+        }
+        let seen = covered.max(1) as f64;
+        Evidence { length_steps: length / step, coverage: covered as f64 / places.len().max(1) as f64, agreement: agreement / seen, angle_deg: angle / seen }
+    }
+
+    /// The curve's confidence, 0 to 1: the product of its coverage, a length term that
+    /// saturates over a few steps (1 - exp(-length / [`CONFIDENT_STEPS`])), and its agreement
+    /// above [`AGREEMENT_FLOOR`], rescaled to 0-1.
+    pub fn confidence(&self) -> f64 {
+        let length = 1.0 - (-self.length_steps / CONFIDENT_STEPS).exp();
+        let agreement = ((self.agreement - AGREEMENT_FLOOR) / (1.0 - AGREEMENT_FLOOR)).clamp(0.0, 1.0);
+        self.coverage * length * agreement
+    }
 }
 
 /// Orders and signs the normal pair `n` to agree with `reference`.

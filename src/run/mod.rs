@@ -63,6 +63,12 @@ pub struct RunOptions {
     pub cancel: Cancel,
     /// Where intermediate point sets are written, if anywhere.
     pub debug: DebugDump,
+    /// Curves below this confidence are left out of the outputs (see
+    /// [`Polyline::confidence`](crate::curves::Polyline::confidence)). An output filter: a
+    /// finished run given another value writes its outputs again, without recomputing tiles.
+    pub min_confidence: f64,
+    /// Curves shorter than this (model units) are left out of the outputs (an output filter).
+    pub min_length: f64,
 }
 
 impl Default for RunOptions {
@@ -75,6 +81,8 @@ impl Default for RunOptions {
             progress: crate::progress::Mode::Quiet,
             cancel: Cancel::default(),
             debug: DebugDump::default(),
+            min_confidence: polylines::DEFAULT_MIN_CONFIDENCE,
+            min_length: 0.0,
         }
     }
 }
@@ -90,6 +98,10 @@ pub struct Report {
     pub params: Resolved,
     /// Residual threshold used.
     pub tau: f64,
+    /// Confidence below which curves were left out.
+    pub min_confidence: f64,
+    /// Length below which curves were left out.
+    pub min_length: f64,
     /// Counts per stage.
     pub counts: Counts,
     /// Seconds per stage.
@@ -555,10 +567,13 @@ impl<'a> Run<'a> {
         };
         let traced = polylines::grow_and_complete(smoothed, &grouped, origin, r, &self.opts.debug, &self.opts.cancel);
         self.opts.cancel.check()?;
-        (counts.grown, counts.curves) = (traced.grown, traced.curves.len() as u64);
+        let all = traced.curves.len();
+        let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
+        let curves: Vec<Polyline> = traced.curves.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
+        (counts.grown, counts.curves, counts.left_out) = (traced.grown, curves.len() as u64, (all - curves.len()) as u64);
         (seconds.growing, seconds.completion) = (traced.growing_seconds, traced.completion_seconds);
         self.pass.curves = t.elapsed().as_secs_f64();
-        Ok((traced.curves, counts, seconds))
+        Ok((curves, counts, seconds))
     }
 
     /// Stage 3 and the consensus filter, tile by tile (`boxes`: each tile's edge point bounds),
@@ -622,6 +637,8 @@ impl<'a> Run<'a> {
             halo: r.halo(),
             params: r,
             tau,
+            min_confidence: self.opts.min_confidence,
+            min_length: self.opts.min_length,
             counts,
             seconds,
             pass_seconds: self.pass.clone(),
