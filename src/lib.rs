@@ -10,6 +10,7 @@
 //! - [`tiles`]: the tile grid, the tile store (tiles written once, halos assembled on read),
 //!   the bucketer;
 //! - [`curves`]: the output polylines and their OBJ, PLY and GeoJSON writers and readers;
+//! - [`preview`]: `preview.png`, the cloud and its curves from two sides;
 //! - [`extract`]: the method, stage by stage, as functions of plain data (statistics,
 //!   candidates, projection, smoothing, growing, completion);
 //! - [`run`]: the pipeline (plan, bucket, statistics, residuals, projection, curves, write) over
@@ -38,6 +39,7 @@ pub mod io;
 pub(crate) mod keys;
 pub mod mem;
 pub mod points;
+pub mod preview;
 pub mod progress;
 pub mod rng;
 pub mod run;

@@ -403,6 +403,10 @@ fn output_filters_rewrite_a_finished_run() {
     };
     let first = run(&[]);
     assert_eq!((first["counts"]["curves"].as_u64(), first["counts"]["left_out"].as_u64()), (Some(12), Some(0)));
+    // preview.png: a PNG, two views of 800 x 800 side by side.
+    let png = std::fs::read(dir.join("preview.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    assert_eq!((&png[12..16], &png[16..20], &png[20..24]), (&b"IHDR"[..], &1600u32.to_be_bytes()[..], &800u32.to_be_bytes()[..]));
     let curves = read_obj(&dir.join("curves.obj")).unwrap();
     assert!(curves.iter().all(|c| c.confidence > 0.5 && c.confidence < 1.0), "{:?}", curves.iter().map(|c| c.confidence).collect::<Vec<_>>());
     let strict = run(&["--min-confidence", "1"]);

@@ -35,7 +35,7 @@ use crate::extract::polylines::{self, SmoothedEdges};
 use crate::extract::statistics::{self, StatsTile};
 use crate::extract::{project, Counts, Params, Resolved, Timings};
 use crate::io::{self, Filter};
-use crate::keys::{key_quantum, settle, snap_quantum};
+use crate::keys::{keep_point, key_quantum, position_key, settle, snap_quantum};
 use crate::points::{Bounds, Crs, TilePoints};
 use crate::progress::Progress;
 use crate::tiles::{Bucketer, Grid, Store};
@@ -303,7 +303,7 @@ fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>
         }
         _ => {}
     }
-    for name in [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "curves.obj", "curves.ply", "curves.geojson", "report.json"] {
+    for name in [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "curves.obj", "curves.ply", "curves.geojson", "preview.png", "report.json"] {
         ws.remove(name);
     }
     let (b, declared) = bounds()?;
@@ -621,11 +621,29 @@ impl<'a> Run<'a> {
     /// The write step: the outputs, then the manifest marked finished.
     fn write(&mut self, curves: &[Polyline], crs: &Crs) -> Result<()> {
         let t = Instant::now();
-        write_outputs(self.ws.root(), curves, crs)?;
+        write_outputs(self.ws.root(), curves, crs, &self.preview_sample()?)?;
         self.manifest.finished = true;
         manifest::save(&self.ws, &self.manifest)?;
         self.pass.writing = t.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// About [`PREVIEW_POINTS`](crate::preview::PREVIEW_POINTS) of the cloud's points, chosen
+    /// by position key from the tile store, in tile order.
+    fn preview_sample(&self) -> Result<Vec<DVec3>> {
+        let total: u64 = self.manifest.tile_points.iter().sum();
+        let share = crate::preview::PREVIEW_POINTS / total.max(1) as f64;
+        let store = Store::new(&self.ws)?;
+        let parts: Vec<Vec<DVec3>> = self
+            .tiles
+            .par_iter()
+            .map(|&t| {
+                let mut tp = TilePoints::default();
+                store.read(t, &mut tp, |p, _| keep_point(position_key(p, self.kq) ^ 0x9E37_79B9, share, 1))?;
+                Ok(tp.xyz)
+            })
+            .collect::<Result<_>>()?;
+        Ok(parts.concat())
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -654,14 +672,15 @@ impl<'a> Run<'a> {
     }
 }
 
-fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs) -> Result<()> {
+fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs, sample: &[DVec3]) -> Result<()> {
     // Each output goes to a temporary name first, then is renamed into place.
     let tmp = dir.join("out.tmp");
     std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
     write_obj(&tmp.join("curves.obj"), curves)?;
     write_ply(&tmp.join("curves.ply"), curves)?;
     write_geojson(&tmp.join("curves.geojson"), curves, crs)?;
-    for f in ["curves.obj", "curves.ply", "curves.geojson"] {
+    crate::preview::write_png(&tmp.join("preview.png"), sample, curves)?;
+    for f in ["curves.obj", "curves.ply", "curves.geojson", "preview.png"] {
         let p = tmp.join(f);
         std::fs::File::open(&p).and_then(|f| f.sync_all()).map_err(|e| Error::output(&p, e))?;
         std::fs::rename(&p, dir.join(f)).map_err(|e| Error::output(&p, e))?;
