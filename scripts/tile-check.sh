@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Tile independence on a synthetic scene: extraction with tile sizes giving 1, 4, 16 and 64+
 # tiles; curve counts, and the largest distance from a vertex of one result to the other's
-# curves (both ways), in units of the spacing kappa.   scripts/tile-check.sh [WORKDIR] [POINTS]
+# curves (both ways), in units of the spacing kappa.
+#   scripts/tile-check.sh [WORKDIR] [POINTS] [CLOUD]
+# CLOUD: check this cloud instead of the scene (e.g. `crease synth scene --clutter`, or a
+# noisy shape).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --quiet
@@ -9,7 +12,7 @@ bin=$PWD/target/release/crease
 work=${1:-$(mktemp -d)}
 n=${2:-5000000}
 mkdir -p "$work"
-las=$work/scene_$n.las
+las=${3:-$work/scene_$n.las}
 [ -f "$las" ] || "$bin" synth scene -n "$n" -o "$las" 2>/dev/null
 side=$(python3 -c "import json,subprocess;i=json.loads(subprocess.check_output(['$bin','info','--json','$las']))[0]['bounds'];print(max(i['max'][0]-i['min'][0], i['max'][1]-i['min'][1]))")
 for k in 1 2 4 8; do
