@@ -106,11 +106,15 @@ pub struct CompleteParams {
     pub corner_zone: f64,
 }
 
-/// Completes `curves` using the projection stage's `corners`.
-pub fn complete(mut curves: Vec<Curve>, corners: &[DVec3], p: &CompleteParams) -> Vec<Curve> {
+/// Completes `curves` using the projection stage's `corners`. Once `cancel` is set, what comes
+/// back is partial (the caller sees the flag and discards it).
+pub fn complete(mut curves: Vec<Curve>, corners: &[DVec3], p: &CompleteParams, cancel: &crate::cancel::Cancel) -> Vec<Curve> {
     curves.retain(|c| c.v.len() >= 2);
     attach_corners(&mut curves, corners, p);
-    resolve_free_ends(&mut curves, p);
+    resolve_free_ends(&mut curves, p, cancel);
+    if cancel.is_set() {
+        return curves;
+    }
     resolve_corners(&mut curves, p.corner_zone);
     let min_len = p.min_steps * p.step;
     curves.retain(|c| {
@@ -207,7 +211,7 @@ impl Vertices {
 /// Gives every free end its action (see the module notes), in passes over the curves until a
 /// pass changes nothing. An end that acted is looked at again at once (after a join it is a
 /// different end); every action removes at least one free end, so the passes end.
-fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams) {
+fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams, cancel: &crate::cancel::Cancel) {
     let reach = p.reach * p.step;
     let cos = p.aperture_deg.to_radians().cos();
     let mut index = Vertices::new(curves, reach);
@@ -215,6 +219,9 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams) {
         let mut changed = false;
         let mut ci = 0;
         while ci < curves.len() {
+            if ci % 1024 == 0 && cancel.is_set() {
+                return;
+            }
             let mut again = false;
             for e in 0..2 {
                 // (Curves joined into another are left empty until the end.)
@@ -586,14 +593,14 @@ mod tests {
         let p = CompleteParams { step: 0.1, reach: 4.0, aperture_deg: 45.0, min_steps: 3.0, smooth_passes: 0, corner_zone: 0.0 };
         // A branch 0.5 long meets the line: the line is split at a new shared corner.
         let mut curves = branch_towards_a_line(6);
-        resolve_free_ends(&mut curves, &p);
+        resolve_free_ends(&mut curves, &p, &crate::cancel::Cancel::default());
         assert_eq!(curves.len(), 3);
         let corner = DVec3::new(1.5, 0.0, 0.0);
         assert!(curves.iter().all(|c| c.v.contains(&corner)));
         // A fragment 0.1 long does not: its tangent is no surer than that.
         let mut curves = branch_towards_a_line(2);
         let before = curves.clone();
-        resolve_free_ends(&mut curves, &p);
+        resolve_free_ends(&mut curves, &p, &crate::cancel::Cancel::default());
         assert_eq!(curves, before);
     }
 

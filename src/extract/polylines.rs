@@ -146,7 +146,10 @@ pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3,
         smooth_passes: 2,
         corner_zone: r.corner_radius,
     };
-    let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), grouped, &cp);
+    let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), grouped, &cp, cancel);
+    if cancel.is_set() {
+        return traced;
+    }
     traced.curves = to_polylines(&curves, index.as_ref(), &normals, origin, r.step);
     traced.completion_seconds = t.elapsed().as_secs_f64();
     traced
