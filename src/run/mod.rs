@@ -676,10 +676,15 @@ fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs, samp
     // Each output goes to a temporary name first, then is renamed into place.
     let tmp = dir.join("out.tmp");
     std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
-    write_obj(&tmp.join("curves.obj"), curves)?;
-    write_ply(&tmp.join("curves.ply"), curves)?;
-    write_geojson(&tmp.join("curves.geojson"), curves, crs)?;
-    crate::preview::write_png(&tmp.join("preview.png"), sample, curves)?;
+    let (written, preview) = rayon::join(
+        || {
+            write_obj(&tmp.join("curves.obj"), curves)?;
+            write_ply(&tmp.join("curves.ply"), curves)?;
+            write_geojson(&tmp.join("curves.geojson"), curves, crs)
+        },
+        || crate::preview::write_png(&tmp.join("preview.png"), sample, curves),
+    );
+    written.and(preview)?;
     for f in ["curves.obj", "curves.ply", "curves.geojson", "preview.png"] {
         let p = tmp.join(f);
         std::fs::File::open(&p).and_then(|f| f.sync_all()).map_err(|e| Error::output(&p, e))?;
