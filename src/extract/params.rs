@@ -1,7 +1,7 @@
 //! The method's parameters: what the user gives ([`Params`]), and every default resolved from
 //! the measured spacing and noise ([`Resolved`]).
 
-use super::statistics::{median, PointStats};
+use super::statistics::{median, quantile, PointStats};
 use crate::keys::settle;
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +35,12 @@ pub struct Resolved {
     pub kappa: f64,
     /// Estimated noise: standard deviation of points about their local plane.
     pub noise: f64,
+    /// The noise of the smoothest quarter of the sampled surfaces (the first quartile of the
+    /// sampled noise): the scanner's own, which rough ground and vegetation inflate less than
+    /// the median. What a surface must fit to within (see
+    /// [`SURFACE_NOISE`](super::project::SURFACE_NOISE)).
+    #[serde(default)]
+    pub surface_noise: f64,
     /// Length unit of the defaults: max(kappa, 2 noise), so neighbourhoods outgrow the noise.
     pub scale: f64,
     /// Share of points used by the fits (1: all; less when noise makes neighbourhoods large).
@@ -122,6 +128,7 @@ impl Params {
         Resolved {
             kappa,
             noise,
+            surface_noise: noise,
             scale,
             keep: 1.0,
             fit_radius: self.fit_radius.unwrap_or(6.0 * scale),
@@ -147,6 +154,7 @@ pub fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
     let mut n: Vec<f64> = stats.iter().map(|s| s.noise).collect();
     let mut d: Vec<f64> = stats.iter().map(|s| s.density).collect();
     let mut r = params.resolve(settle(median(&mut k)), settle(median(&mut n)));
+    r.surface_noise = settle(quantile(&mut n, 0.25));
     let count = median(&mut d) * std::f64::consts::PI * r.fit_radius.powi(2);
     r.keep = if count > 0.0 { (TARGET_NEIGHBOURS / count).min(1.0) } else { 1.0 };
     if r.keep >= 0.7 {

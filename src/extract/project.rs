@@ -134,7 +134,8 @@ const CREASE_SPLIT_DEG: f64 = 20.0;
 /// clouds at two seeds, 0.5 gave the best precision and mean distance of 0, 0.5 and 1.
 const CORE_FRACTION: f64 = 0.5;
 /// An edge point is kept only where both of its surfaces fit their points to within this many
-/// noise deviations (RMS), or a quarter of the length scale on a clean cloud. Volumetric
+/// noise deviations (RMS; the noise of the smoothest surfaces, see
+/// [`Resolved::surface_noise`]), or a quarter of the length scale on a clean cloud. Volumetric
 /// scatter (tree crowns, hedges) splits into "surfaces" as readily as a solid does, but none
 /// of them fits: their RMS is the scatter's thickness within the ball, tens of noise
 /// deviations.
@@ -192,7 +193,7 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges 
         min_angle_deg: r.min_angle_deg,
         seed: r.seed,
         noise: r.noise,
-        max_rms: (SURFACE_NOISE * r.noise).max(0.25 * r.scale),
+        max_rms: (SURFACE_NOISE * r.surface_noise).max(0.25 * r.scale),
     };
     let projected = project(cloud, candidates, &ids, &pp);
     let one_surface = projected.iter().filter(|x| x.surfaces == 1).count() as u64;

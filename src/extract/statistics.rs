@@ -84,10 +84,15 @@ pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option
 }
 
 pub(crate) fn median(v: &mut [f64]) -> f64 {
+    quantile(v, 0.5)
+}
+
+/// The value below which the share `q` of `v` lies (an element of `v`; 0 if empty).
+pub(crate) fn quantile(v: &mut [f64], q: f64) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
-    let m = v.len() / 2;
+    let m = ((v.len() as f64 * q) as usize).min(v.len() - 1);
     *v.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
 }
 
