@@ -153,8 +153,12 @@ pub fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
     let mut k: Vec<f64> = stats.iter().map(|s| s.spacing).collect();
     let mut n: Vec<f64> = stats.iter().map(|s| s.noise).collect();
     let mut d: Vec<f64> = stats.iter().map(|s| s.density).collect();
-    let mut r = params.resolve(settle(median(&mut k)), settle(median(&mut n)));
-    r.surface_noise = settle(quantile(&mut n, 0.25));
+    let spacing = settle(median(&mut k));
+    // (On a noise-free cloud the fits leave rounding residue, 1e-31 or so, that differs with
+    // the tiles' origins: below a 2^-26 share of the spacing, noise is zero.)
+    let noise = |x: f64| if x < spacing * 2f64.powi(-26) { 0.0 } else { settle(x) };
+    let mut r = params.resolve(spacing, noise(median(&mut n)));
+    r.surface_noise = noise(quantile(&mut n, 0.25));
     let count = median(&mut d) * std::f64::consts::PI * r.fit_radius.powi(2);
     r.keep = if count > 0.0 { (TARGET_NEIGHBOURS / count).min(1.0) } else { 1.0 };
     if r.keep >= 0.7 {
