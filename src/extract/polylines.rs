@@ -246,8 +246,6 @@ pub struct Evidence {
     /// How well the two normals of the edge points at a place agree with their mean, on
     /// average (1: all the same; two surfaces fitted at random agree little).
     pub agreement: f64,
-    /// Mean angle between the two surface normals, degrees.
-    pub angle_deg: f64,
 }
 
 impl Evidence {
@@ -267,7 +265,7 @@ impl Evidence {
         if !closed || n <= 2 {
             places.extend(v.last());
         }
-        let (mut covered, mut agreement, mut angle) = (0usize, 0.0, 0.0);
+        let (mut covered, mut agreement) = (0usize, 0.0);
         let mut near = vec![];
         for p in &places {
             near.clear();
@@ -286,10 +284,9 @@ impl Evidence {
             covered += 1;
             agreement +=
                 near.iter().map(|&(j, _)| align(pair(j), mean)).map(|a| a[0].dot(mean[0]).min(a[1].dot(mean[1])).max(0.0)).sum::<f64>() / near.len() as f64;
-            angle += mean[0].dot(mean[1]).abs().min(1.0).acos().to_degrees();
         }
         let seen = covered.max(1) as f64;
-        Evidence { length_steps: length / step, coverage: covered as f64 / places.len().max(1) as f64, agreement: agreement / seen, angle_deg: angle / seen }
+        Evidence { length_steps: length / step, coverage: covered as f64 / places.len().max(1) as f64, agreement: agreement / seen }
     }
 
     /// The curve's confidence, 0 to 1: the product of its coverage, a length term that
