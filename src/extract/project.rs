@@ -589,6 +589,21 @@ pub fn group_corners(corners: &[CornerPoint], radius: f64, min_support: usize) -
 mod tests {
     use super::*;
 
+    /// Projection parameters for a ball of `radius` in a cloud moved by noise uniform in a ball
+    /// of radius `noise` (whose deviation about a plane is noise / sqrt 5).
+    fn test_params(radius: f64, noise: f64) -> ProjectParams {
+        let deviation = noise / 5f64.sqrt();
+        ProjectParams {
+            radius,
+            reach: f64::INFINITY,
+            min_threshold: 1e-4,
+            min_angle_deg: 28.0,
+            seed: 1,
+            noise: deviation,
+            max_rms: (SURFACE_NOISE * deviation).max(1e-4),
+        }
+    }
+
     /// Mean offset, along the outward bisector, of the edge points projected from candidates
     /// near a convex edge along y with interior angle `phi` degrees (one face z = 0, x < 0)
     /// sampled with noise uniform in a ball of radius `noise`; and how many there are.
@@ -610,16 +625,7 @@ mod tests {
         };
         let cand: Vec<u32> = (0..cloud.len() as u32).filter(|&i| near(i)).collect();
         let ids: Vec<u64> = cand.iter().map(|&i| cloud.gid[i as usize]).collect();
-        // (The deviation about a plane of a displacement uniform in a ball is radius / sqrt 5.)
-        let p = ProjectParams {
-            radius,
-            reach: f64::INFINITY,
-            min_threshold: 1e-4,
-            min_angle_deg: 28.0,
-            seed: 1,
-            noise: noise / 5f64.sqrt(),
-            max_rms: (SURFACE_NOISE * noise / 5f64.sqrt()).max(1e-4),
-        };
+        let p = test_params(radius, noise);
         let offsets: Vec<f64> = project(&cloud, &cand, &ids, &p).iter().filter_map(|o| o.edge).map(|e| (e.p + cloud.origin).dot(out_dir)).collect();
         (offsets.iter().sum::<f64>() / offsets.len() as f64, offsets.len())
     }
@@ -707,15 +713,7 @@ mod tests {
                 })
                 .collect();
             let ids: Vec<u64> = candidates.iter().map(|&i| i as u64).collect();
-            let p = ProjectParams {
-                radius,
-                reach: f64::INFINITY,
-                min_threshold: 1e-4,
-                min_angle_deg: 28.0,
-                seed: 1,
-                noise: noise / 5f64.sqrt(),
-                max_rms: (SURFACE_NOISE * noise / 5f64.sqrt()).max(1e-4),
-            };
+            let p = test_params(radius, noise);
             let out = project(&cloud, &candidates, &ids, &p);
             let split = out.iter().filter(|r| r.surfaces >= 3).count();
             assert!(split * 50 < out.len(), "seed {seed}: {split} of {} candidates found the wall split in two", out.len());
