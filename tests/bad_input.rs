@@ -279,7 +279,8 @@ fn header_bounds_that_are_not_numbers() {
 
 /// A LAZ header that disagrees with its compressed data: a record length two bytes longer than
 /// the laszip items (an assertion inside the `laz` crate, which reached the user as a panic),
-/// and a chunk size of 1. Both: exit 2 and one line naming the file.
+/// a chunk size of 1 (a capacity overflow inside it), and a chunk table that declares 2^32-1
+/// chunks (which asked for 68 GB and aborted). Each: exit 2 and one line naming the file.
 #[test]
 #[ignore = "needs ../shared"]
 fn laz_headers_that_disagree_with_their_data() {
@@ -294,12 +295,51 @@ fn laz_headers_that_disagree_with_their_data() {
     let mut chunk = bytes.clone();
     let at = chunk.windows(14).position(|w| w == b"laszip encoded").unwrap() - 2 + 54 + 12;
     chunk[at..at + 4].copy_from_slice(&1u32.to_le_bytes());
-    for (name, b) in [("record_length.laz", rl), ("chunk_size.laz", chunk)] {
+    // The chunk table's count: 4 bytes into the table, whose offset is the first 8 bytes of the
+    // point data (LAS header byte 96 holds the offset to the point data).
+    let mut table = bytes.clone();
+    let data = u32::from_le_bytes(table[96..100].try_into().unwrap()) as usize;
+    let at = i64::from_le_bytes(table[data..data + 8].try_into().unwrap()) as usize + 4;
+    table[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    for (name, b, says) in [
+        ("record_length.laz", rl, "disagrees with the laszip record's items"),
+        ("chunk_size.laz", chunk, "compressed point data"),
+        ("chunk_table.laz", table, "the chunk table declares 4294967295 chunks"),
+    ] {
         let p = d.path().join(name);
         std::fs::write(&p, b).unwrap();
         let (code, _, err) = crease(&["extract", p.to_str().unwrap(), "-o", d.path().join(format!("run_{name}")).to_str().unwrap(), "-q"]);
         assert_eq!(code, 2, "{name}: {err}");
         assert!(!err.contains("panicked") && err.trim_end().lines().count() == 1, "{name}: {err}");
-        assert!(err.contains(name) && err.contains("compressed point data"), "{name}: {err}");
+        assert!(err.contains(name) && err.contains(says), "{name}: {err}");
     }
+}
+
+/// An EVLR whose declared length runs past the end of the file: the `las` crate allocated the
+/// declared length (27 TB in the case the fuzzer found) before reading it.
+#[test]
+fn an_evlr_longer_than_the_file() {
+    let d = tmp();
+    let p = d.path().join("evlr.las");
+    let mut b = las::Builder::from((1, 4));
+    b.point_format = las::point::Format::new(0).unwrap();
+    b.evlrs.push(las::Vlr { user_id: "crease".into(), record_id: 1, description: "test".into(), data: vec![7; 100] });
+    let mut w = las::Writer::from_path(&p, b.into_header().unwrap()).unwrap();
+    for i in 0..10 {
+        w.write_point(las::Point { x: i as f64, y: 1.0, z: 2.0, ..Default::default() }).unwrap();
+    }
+    w.close().unwrap();
+    expect_error_free(&p);
+    // LAS 1.4 header byte 235: the first EVLR's offset; its length is 20 bytes into it.
+    let mut bytes = std::fs::read(&p).unwrap();
+    let at = u64::from_le_bytes(bytes[235..243].try_into().unwrap()) as usize + 20;
+    bytes[at..at + 8].copy_from_slice(&(1u64 << 44).to_le_bytes());
+    std::fs::write(&p, bytes).unwrap();
+    expect_error(&p, "EVLR 1 of 1 declares 17592186044416 bytes");
+}
+
+/// `crease info PATH` succeeds.
+fn expect_error_free(path: &Path) {
+    let (code, _, err) = crease(&["info", path.to_str().unwrap()]);
+    assert_eq!(code, 0, "{}: {err}", path.display());
 }

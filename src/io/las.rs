@@ -101,6 +101,8 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
     }
     let offset_to_points = raw.offset_to_point_data as u64;
     let record_len = raw.point_data_record_length as usize;
+    // (The `las` crate allocates what an EVLR declares before reading it.)
+    check_evlrs(path, bytes, &raw)?;
     let header = las::Header::new(Cursor::new(bytes)).map_err(|e| las_error(path, e))?;
     let base_len = {
         let mut f = *header.point_format();
@@ -121,8 +123,79 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
             ));
         }
     }
+    if compressed {
+        check_laz(path, bytes, &header, offset_to_points, record_len)?;
+    }
     let layout = Layout { record_len, extended: fmt >= 6, scale, offset };
     Ok(Parsed { header, offset_to_points, layout, compressed })
+}
+
+/// Reads a little-endian integer of `N` bytes at `at`, if the file holds it.
+fn le<const N: usize>(bytes: &[u8], at: u64) -> Option<[u8; N]> {
+    let at = usize::try_from(at).ok()?;
+    bytes.get(at..at.checked_add(N)?)?.try_into().ok()
+}
+
+/// Checks that each EVLR lies within the file: a header whose EVLRs run past its end is
+/// truncated or corrupt.
+fn check_evlrs(path: &Path, bytes: &[u8], raw: &las::raw::Header) -> Result<()> {
+    const EVLR_HEADER: u64 = 60;
+    let Some(e) = raw.evlr.filter(|e| e.start_of_first_evlr > 0 && e.number_of_evlrs > 0) else {
+        return Ok(());
+    };
+    let len = bytes.len() as u64;
+    let mut at = e.start_of_first_evlr;
+    for k in 0..e.number_of_evlrs {
+        let Some(size) = le::<8>(bytes, at.saturating_add(20)).map(u64::from_le_bytes) else {
+            return Err(Error::input(path, format!("EVLR {} of {} starts at byte {at}, past the end of the file ({len} bytes)", k + 1, e.number_of_evlrs)));
+        };
+        let data = at + EVLR_HEADER;
+        if size > len.saturating_sub(data) {
+            return Err(Error::input(
+                path,
+                format!("EVLR {} of {} declares {size} bytes but the file ends {} bytes after its start", k + 1, e.number_of_evlrs, len.saturating_sub(data)),
+            ));
+        }
+        at = data + size;
+    }
+    Ok(())
+}
+
+/// Checks a LAZ file's laszip record and chunk table against the file before the `laz` crate
+/// sizes anything from them: its chunk table is read into a vector of the declared length
+/// (4 billion chunks asked for 68 GB), and a record length that disagrees with the compressed
+/// items trips an assertion.
+fn check_laz(path: &Path, bytes: &[u8], header: &las::Header, data_start: u64, record_len: usize) -> Result<()> {
+    let Some(vlr) = header.vlrs().iter().find(|v| v.user_id == "laszip encoded" && v.record_id == 22204) else {
+        return Err(Error::input(path, "compressed points but no laszip record (VLR 'laszip encoded' 22204)"));
+    };
+    let d = &vlr.data;
+    let field = |at: usize, n: usize| d.get(at..at + n).ok_or_else(|| Error::input(path, format!("laszip record of {} bytes is too short", d.len())));
+    let chunk_size = u32::from_le_bytes(field(12, 4)?.try_into().expect("4 bytes"));
+    let items = u16::from_le_bytes(field(32, 2)?.try_into().expect("2 bytes")) as usize;
+    let table = field(34, 6 * items)?;
+    let item_bytes: usize = table.chunks_exact(6).map(|it| u16::from_le_bytes([it[2], it[3]]) as usize).sum();
+    if item_bytes != record_len {
+        return Err(Error::input(path, format!("point record length {record_len} disagrees with the laszip record's items ({item_bytes} bytes)")));
+    }
+    if chunk_size == 0 {
+        return Err(Error::input(path, "laszip record declares chunks of 0 points"));
+    }
+    // The chunk table's offset follows the header; a writer that could not seek back puts it
+    // in the file's last 8 bytes instead (the `laz` crate looks there too).
+    let len = bytes.len() as u64;
+    let offset_at = |at: u64| le::<8>(bytes, at).map(i64::from_le_bytes).filter(|&o| o > data_start as i64).map(|o| o as u64);
+    let Some(table_at) = offset_at(data_start).or_else(|| offset_at(len.saturating_sub(8))) else {
+        return Ok(());
+    };
+    let Some(count) = le::<4>(bytes, table_at.saturating_add(4)).map(u32::from_le_bytes) else {
+        return Err(Error::input(path, format!("the chunk table's offset {table_at} is past the end of the file ({len} bytes)")));
+    };
+    // Each chunk takes at least a byte between the points' start and the table.
+    if count as u64 > table_at - data_start {
+        return Err(Error::input(path, format!("the chunk table declares {count} chunks in {} bytes of compressed points", table_at - data_start)));
+    }
+    Ok(())
 }
 
 fn crs_of(header: &las::Header) -> Crs {
