@@ -47,6 +47,11 @@ fi
 ./target/release/crease extract "$seeds/cube.ply" --tile-size 0.45 -o "$seeds/run" 2>/dev/null >/dev/null
 cp "$seeds/run/manifest.json" "$FUZZ/corpus/manifest/seed-cube.json"
 
+# Build first: a target that does not build must not count as fuzzed.
+for t in "${TARGETS[@]}"; do
+  cargo +nightly fuzz build --fuzz-dir "$FUZZ" -O "$t" || { echo "fuzz target $t does not build"; exit 1; }
+done
+
 status=0
 for t in "${TARGETS[@]}"; do
   log="$FUZZ/artifacts/$t.log"

@@ -306,10 +306,21 @@ fn read_curves(path: &std::path::Path) -> Result<Vec<crease::curves::Polyline>, 
     }
 }
 
+fn warn(msg: &str) {
+    eprintln!("crease: warning: {msg}");
+}
+
+/// The point files `paths` name (directories expanded), with a warning for what was passed over.
+fn input_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, Error> {
+    let inputs = crease::io::expand_inputs(paths)?;
+    inputs.warnings(|_| false).iter().for_each(|w| warn(w));
+    Ok(inputs.files)
+}
+
 fn run(cli: Cli) -> Result<(), Error> {
     match cli.cmd {
         Cmd::Info { paths, json } => {
-            let files = crease::io::expand_inputs(&paths)?;
+            let files = input_files(&paths)?;
             let infos = files.iter().map(|f| crease::info::file_info(f)).collect::<Result<Vec<_>, _>>()?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&infos).expect("info serialises"));
@@ -318,7 +329,7 @@ fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Cmd::Scan { paths, filter, json } => {
-            let files = crease::io::expand_inputs(&paths)?;
+            let files = input_files(&paths)?;
             let t = Instant::now();
             let mut report = vec![];
             let mut total = 0u64;
@@ -415,10 +426,11 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         debug: crease::debug::DebugDump::new(debug_dir.or_else(|| std::env::var_os("CREASE_DEBUG_DIR").map(PathBuf::from))),
         min_confidence,
         min_length,
+        warn,
     };
     let params = params.params()?;
     let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {
-        crease::io::expand_inputs(&paths)?
+        input_files(&paths)?
             .into_iter()
             .map(|f| {
                 let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();

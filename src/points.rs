@@ -128,6 +128,43 @@ pub struct CloudHeader {
     pub bounds: Bounds,
     /// The CRS, if the file carries one.
     pub crs: Crs,
+    /// How the file stores coordinates.
+    pub precision: Precision,
+}
+
+/// How a file stores coordinates, which sets the smallest step between two positions.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// Integers times a scale factor (LAS, whose largest factor this is; integer PLY
+    /// properties, with a factor of 1).
+    Scaled(f64),
+    /// Floating point with this many mantissa bits: 23 (float32) or 52 (float64).
+    Float(u32),
+}
+
+impl Precision {
+    /// The step between neighbouring coordinates near the largest magnitude in `b` (0 if `b`
+    /// is not usable).
+    ///
+    /// ```
+    /// use crease::points::{Bounds, Precision};
+    /// let utm = Bounds { min: [500_000.0, 5_000_000.0, 0.0], max: [501_000.0, 5_001_000.0, 50.0] };
+    /// assert_eq!(Precision::Float(23).step(&utm), 0.5);
+    /// assert_eq!(Precision::Scaled(0.01).step(&utm), 0.01);
+    /// ```
+    pub fn step(&self, b: &Bounds) -> f64 {
+        match *self {
+            Precision::Scaled(s) => s,
+            Precision::Float(bits) => {
+                let m = (0..3).map(|a| b.min[a].abs().max(b.max[a].abs())).fold(0.0, f64::max);
+                if !(m > 0.0 && m.is_finite()) {
+                    return 0.0;
+                }
+                2f64.powi(m.log2().floor() as i32 - bits as i32)
+            }
+        }
+    }
 }
 
 /// A chunk of points in world coordinates, with their classification (0 if the format has none).

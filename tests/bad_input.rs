@@ -273,6 +273,7 @@ fn header_bounds_that_are_not_numbers() {
     std::fs::write(&p, &bytes).unwrap();
     let (code, _, err) = crease(&["extract", p.to_str().unwrap(), "-o", d.path().join("run").to_str().unwrap(), "-q"]);
     assert!(!err.contains("no points") && !err.contains("panicked"), "{err}");
+    assert!(err.contains("nan_bounds.las: the header's bounds are not usable (not finite or inverted); bounds come from the points"), "{err}");
     // (Collinear points: extraction runs and finds nothing, or refuses them clearly.)
     assert!(code == 0 || (code == 2 && err.trim_end().lines().count() == 1), "{code}: {err}");
 }
@@ -342,4 +343,55 @@ fn an_evlr_longer_than_the_file() {
 fn expect_error_free(path: &Path) {
     let (code, _, err) = crease(&["info", path.to_str().unwrap()]);
     assert_eq!(code, 0, "{}: {err}", path.display());
+}
+
+/// Doubtful but usable input: the run goes on, and says what it passed over or assumed, on
+/// stderr (also with `-q`) and in report.json's `warnings`.
+#[test]
+fn warnings_name_what_was_passed_over_or_assumed() {
+    use crease::io::{PointWriter, WriteOptions};
+    let d = tmp();
+    let scans = d.path().join("scans");
+    std::fs::create_dir_all(scans.join("sub")).unwrap();
+    std::fs::write(scans.join("notes.txt"), "survey notes").unwrap();
+    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let write = |path: &Path, pts: &[glam::DVec3], epsg: Option<u16>| {
+        let mut w = PointWriter::create(path, &WriteOptions { scale: 1e-4, offset: glam::DVec3::ZERO, epsg }).unwrap();
+        w.write(pts, &vec![0; pts.len()]).unwrap();
+        w.finish().unwrap();
+    };
+    // Two halves of a cube, one with a CRS and one without.
+    write(&scans.join("a.las"), &cube[..10_000], Some(32610));
+    write(&scans.join("b.las"), &cube[10_000..], None);
+    let run = d.path().join("run");
+    let (code, _, err) = crease(&["extract", scans.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("report.json")).unwrap()).unwrap();
+    let listed: Vec<&str> = report["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+    for needle in ["passed over 2 entries that are not point files (.las, .laz, .ply): notes.txt, sub/", "b.las: has no CRS; taken to be in", "(EPSG:32610)"] {
+        assert!(err.contains(needle), "stderr should say '{needle}': {err}");
+        assert!(listed.iter().any(|w| w.contains(needle)), "report should list '{needle}': {listed:?}");
+    }
+    assert_eq!(err.lines().count(), 2, "{err}");
+
+    // A float32 PLY far from the origin (a 10 m cube at UTM-like coordinates): its coordinates
+    // step by 0.5 m there, three times the point spacing. Once "5 curves instead of 12" without
+    // a word.
+    let far = d.path().join("far.ply");
+    let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 20000\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec();
+    for p in &cube {
+        let q = *p * 10.0 + glam::DVec3::new(500_000.0, 5_000_000.0, 100.0);
+        for c in q.to_array() {
+            bytes.extend_from_slice(&(c as f32).to_le_bytes());
+        }
+    }
+    std::fs::write(&far, bytes).unwrap();
+    let (code, _, err) = crease(&["extract", far.to_str().unwrap(), "-o", d.path().join("run_far").to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("far.ply: float32 coordinates step by 5.000e-1 here") && err.contains("store double coordinates"), "{err}");
+    // The same cube near the origin: no warning.
+    let near = d.path().join("near.ply");
+    write(&near, &cube, None);
+    let (code, _, err) = crease(&["extract", near.to_str().unwrap(), "-o", d.path().join("run_near").to_str().unwrap(), "-q"]);
+    assert_eq!((code, err.as_str()), (0, ""));
 }

@@ -6,7 +6,7 @@
 //! parallel where the file has chunk tables, and decoded the same way.
 
 use crate::error::{io_input, Error, Result};
-use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
+use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk, Precision};
 use glam::DVec3;
 use memmap2::Mmap;
 use std::fs::File;
@@ -222,6 +222,7 @@ fn cloud_header(path: &Path, p: &Parsed) -> Result<CloudHeader> {
         count: h.number_of_points(),
         bounds,
         crs: crs_of(h),
+        precision: Precision::Scaled(p.layout.scale.max_element()),
     })
 }
 

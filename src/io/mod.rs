@@ -65,23 +65,62 @@ pub fn format_of(path: &Path) -> Option<FileFormat> {
     }
 }
 
+/// The point files the user's paths name, and what was passed over.
+#[derive(Clone, Debug, Default)]
+pub struct Inputs {
+    /// Point files, in order.
+    pub files: Vec<PathBuf>,
+    /// Per directory given, the entries that are not point files (other files, subdirectories).
+    pub passed_over: Vec<(PathBuf, Vec<PathBuf>)>,
+}
+
+impl Inputs {
+    /// One line per directory that held entries passed over, leaving out those `expected`
+    /// accepts (a run directory's own files, say).
+    pub fn warnings(&self, expected: impl Fn(&Path) -> bool) -> Vec<String> {
+        let mut out = vec![];
+        for (dir, entries) in &self.passed_over {
+            let names: Vec<String> = entries
+                .iter()
+                .filter(|e| !expected(e))
+                .map(|e| e.file_name().map(|n| n.to_string_lossy().into_owned() + if e.is_dir() { "/" } else { "" }).unwrap_or_default())
+                .collect();
+            if !names.is_empty() {
+                let shown = names.iter().take(5).cloned().collect::<Vec<_>>().join(", ");
+                let more = if names.len() > 5 { format!(" and {} more", names.len() - 5) } else { String::new() };
+                out.push(format!("{}: passed over {} entries that are not point files (.las, .laz, .ply): {shown}{more}", dir.display(), names.len()));
+            }
+        }
+        out
+    }
+}
+
 /// Expands the user's paths: files are kept as given, directories are replaced by the point
-/// files (`.las`, `.laz`, `.ply`) directly inside them, sorted by name.
-pub fn expand_inputs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
+/// files (`.las`, `.laz`, `.ply`) directly inside them, sorted by name. Other files and
+/// subdirectories in a directory are passed over, and named in a warning.
+pub fn expand_inputs(paths: &[PathBuf]) -> Result<Inputs> {
+    let mut out = Inputs::default();
     for p in paths {
         let meta = std::fs::metadata(p).map_err(|e| io_input(p, e))?;
         if meta.is_dir() {
-            let mut files: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| io_input(p, e))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.is_file() && format_of(f).is_some())
-                .collect();
+            let (mut files, mut other) = (vec![], vec![]);
+            for e in std::fs::read_dir(p).map_err(|e| io_input(p, e))? {
+                let f = e.map_err(|e| io_input(p, e))?.path();
+                if f.is_file() && format_of(&f).is_some() {
+                    files.push(f);
+                } else {
+                    other.push(f);
+                }
+            }
             if files.is_empty() {
                 return Err(Error::input(p, "directory holds no point files (.las, .laz, .ply)"));
             }
             files.sort();
-            out.extend(files);
+            out.files.extend(files);
+            if !other.is_empty() {
+                other.sort();
+                out.passed_over.push((p.clone(), other));
+            }
         } else {
             if format_of(p).is_none() {
                 return Err(Error::input(p, "unknown file type (expected .las, .laz or .ply)"));
@@ -90,7 +129,7 @@ pub fn expand_inputs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
             if !meta.is_file() {
                 return Err(Error::input(p, "not a regular file"));
             }
-            out.push(p.clone());
+            out.files.push(p.clone());
         }
     }
     Ok(out)

@@ -3,7 +3,7 @@
 //! memory-mapped.
 
 use crate::error::{io_input, Error, Result};
-use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk};
+use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk, Precision};
 use glam::DVec3;
 use memmap2::Mmap;
 use std::fs::File;
@@ -159,6 +159,22 @@ fn parse_header(text: &str, path: &Path) -> Result<(Option<Encoding>, String, Ve
     Ok((enc, version, elements))
 }
 
+/// The coarsest precision of the three coordinate properties.
+fn precision(types: [Scalar; 3]) -> Precision {
+    if types.contains(&Scalar::F32) {
+        Precision::Float(23)
+    } else if types.contains(&Scalar::F64) {
+        // (With an integer coordinate beside double ones, the integers are the coarser.)
+        if types.iter().all(|&t| t == Scalar::F64) {
+            Precision::Float(52)
+        } else {
+            Precision::Scaled(1.0)
+        }
+    } else {
+        Precision::Scaled(1.0)
+    }
+}
+
 impl PlyReader {
     /// Maps the file and parses its header.
     pub fn open(path: &Path) -> Result<PlyReader> {
@@ -219,6 +235,7 @@ impl PlyReader {
             count: vertex.count,
             bounds: Bounds::EMPTY,
             crs: Crs::default(),
+            precision: precision(xyz.map(|i| vertex.props[i].ty)),
         };
         #[cfg(unix)]
         let _ = map.advise(memmap2::Advice::Sequential);

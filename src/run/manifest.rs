@@ -79,18 +79,24 @@ pub fn stamp(path: &Path) -> Result<InputStamp> {
     Ok(InputStamp { path, size: meta.len(), mtime_ns, header_hash: format!("{:016x}", fnv1a(&head)) })
 }
 
-/// One CRS for all inputs, or an error naming the file that disagrees.
-pub fn common_crs(headers: &[CloudHeader]) -> Result<Crs> {
+/// One CRS for all inputs, or an error naming the file that disagrees. Files without a CRS
+/// are taken to be in the others' CRS; each such file is named in the returned warnings.
+pub fn common_crs(headers: &[CloudHeader]) -> Result<(Crs, Vec<String>)> {
     let known: Vec<&CloudHeader> = headers.iter().filter(|h| !h.crs.is_unknown()).collect();
-    if let Some(first) = known.first() {
-        for h in &known[1..] {
-            if !h.crs.agrees(&first.crs) {
-                return Err(Error::input(&h.path, format!("CRS {} differs from {} in {}", h.crs.summary(), first.crs.summary(), first.path.display())));
-            }
+    let Some(first) = known.first() else {
+        return Ok((Crs::default(), vec![]));
+    };
+    for h in &known[1..] {
+        if !h.crs.agrees(&first.crs) {
+            return Err(Error::input(&h.path, format!("CRS {} differs from {} in {}", h.crs.summary(), first.crs.summary(), first.path.display())));
         }
-        return Ok(first.crs.clone());
     }
-    Ok(Crs::default())
+    let warnings = headers
+        .iter()
+        .filter(|h| h.crs.is_unknown())
+        .map(|h| format!("{}: has no CRS; taken to be in {}'s ({})", h.path.display(), first.path.display(), first.crs.summary()))
+        .collect();
+    Ok((first.crs.clone(), warnings))
 }
 
 /// Reads the manifest of a workspace, if there is one.

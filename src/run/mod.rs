@@ -69,6 +69,8 @@ pub struct RunOptions {
     pub min_confidence: f64,
     /// Curves shorter than this (model units) are left out of the outputs (an output filter).
     pub min_length: f64,
+    /// Called with each warning as it is found (they are also listed in the report).
+    pub warn: fn(&str),
 }
 
 impl Default for RunOptions {
@@ -83,6 +85,7 @@ impl Default for RunOptions {
             debug: DebugDump::default(),
             min_confidence: polylines::DEFAULT_MIN_CONFIDENCE,
             min_length: 0.0,
+            warn: |_| {},
         }
     }
 }
@@ -128,6 +131,9 @@ pub struct Report {
     pub resumed: bool,
     /// Per-tile results of an earlier invocation that were damaged, and were computed again.
     pub repaired: Vec<PathBuf>,
+    /// What the run found doubtful but went on with (files passed over, a CRS assumed, header
+    /// bounds replaced, coarse coordinates).
+    pub warnings: Vec<String>,
 }
 
 /// Seconds per pass.
@@ -187,9 +193,12 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     // (An input directory that is also the run directory holds the run's own curves.ply: a
     // second run would read it as points.)
     let run_dir = dir.canonicalize().ok();
-    let in_run_dir =
-        |f: &PathBuf| run_dir.is_some() && f.file_name() == Some("curves.ply".as_ref()) && f.parent().and_then(|p| p.canonicalize().ok()) == run_dir;
-    let files: Vec<PathBuf> = io::expand_inputs(inputs)?.into_iter().filter(|f| !in_run_dir(f)).collect();
+    let in_run_dir = |f: &Path| run_dir.is_some() && f.parent().and_then(|p| p.canonicalize().ok()) == run_dir;
+    let expanded = io::expand_inputs(inputs)?;
+    let mut warnings = Warnings::new(opts.warn);
+    warnings.extend(expanded.warnings(in_run_dir));
+    let in_run_dir = |f: &PathBuf| in_run_dir(f) && f.file_name() == Some("curves.ply".as_ref());
+    let files: Vec<PathBuf> = expanded.files.into_iter().filter(|f| !in_run_dir(f)).collect();
     let Some(first) = files.first() else {
         return match inputs.first() {
             Some(dir) => Err(Error::input(dir, "holds no point files but the run's own outputs")),
@@ -198,7 +207,11 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     };
     let first = first.clone();
     let headers = files.iter().map(|f| io::read_header(f)).collect::<Result<Vec<_>>>()?;
-    let crs = common_crs(&headers)?;
+    let (crs, crs_warnings) = common_crs(&headers)?;
+    warnings.extend(crs_warnings);
+    for h in headers.iter().filter(|h| h.format != crate::points::FileFormat::Ply && !h.bounds.is_usable()) {
+        warnings.push(format!("{}: the header's bounds are not usable (not finite or inverted); bounds come from the points", h.path.display()));
+    }
     let job = Job {
         version: env!("CARGO_PKG_VERSION").to_string(),
         inputs: files.iter().map(|f| manifest::stamp(f)).collect::<Result<_>>()?,
@@ -226,12 +239,69 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     let (manifest, resumed) = plan(&ws, job, bounds, opts)?;
     let mut run = Run::new(ws, manifest, opts);
     let r = run.tile_passes(&Input::Files(&files, filter), params, &first)?;
+    for h in &headers {
+        warnings.extend(coarse_coordinates(h, &run.manifest.grid, r.kappa));
+    }
     let tau = run.tau;
     let (curves, counts, seconds) = run.curves(&r)?;
     run.write(&curves, &crs)?;
-    let report = run.report(files, r, tau, counts, seconds, t0, resumed);
+    let mut report = run.report(files, r, tau, counts, seconds, t0, resumed);
+    report.warnings = warnings.into_list();
     run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
     Ok(report)
+}
+
+/// Warnings of a run: each is passed to the run's handler as it is found, and listed in the
+/// report.
+struct Warnings {
+    handler: fn(&str),
+    list: Vec<String>,
+}
+
+impl Warnings {
+    fn new(handler: fn(&str)) -> Self {
+        Warnings { handler, list: vec![] }
+    }
+
+    fn push(&mut self, w: String) {
+        (self.handler)(&w);
+        self.list.push(w);
+    }
+
+    fn into_list(self) -> Vec<String> {
+        self.list
+    }
+}
+
+impl Extend<String> for Warnings {
+    fn extend<I: IntoIterator<Item = String>>(&mut self, iter: I) {
+        for w in iter {
+            self.push(w);
+        }
+    }
+}
+
+/// A warning when file `h` stores coordinates in steps coarser than half the point spacing
+/// `kappa`: the quantisation then acts as noise of about a third of a step (RMS), as large as a
+/// scanner's, and float32 files with large coordinates (UTM, say) lose the edges.
+fn coarse_coordinates(h: &crate::points::CloudHeader, grid: &Grid, kappa: f64) -> Option<String> {
+    // (PLY headers hold no bounds: the grid's box, which holds every file, stands in.)
+    let far = std::array::from_fn(|a| grid.origin[a] + grid.dims[a] as f64 * grid.size);
+    let b = if h.bounds.is_usable() { h.bounds } else { Bounds { min: grid.origin, max: far } };
+    let step = h.precision.step(&b);
+    let how = match h.precision {
+        crate::points::Precision::Float(23) => "float32 coordinates",
+        crate::points::Precision::Float(_) => "float64 coordinates",
+        crate::points::Precision::Scaled(_) => "its scale factor",
+    };
+    (step > 0.5 * kappa).then(|| {
+        format!(
+            "{}: {how} step by {step:.3e} here, {:.1} times the point spacing ({kappa:.3e}): the curves lose detail{}",
+            h.path.display(),
+            step / kappa,
+            if matches!(h.precision, crate::points::Precision::Float(23)) { "; store double coordinates or move the origin nearer" } else { "" }
+        )
+    })
 }
 
 /// Extracts feature curves from `points` (world coordinates) held in memory: the same pipeline
@@ -668,6 +738,7 @@ impl<'a> Run<'a> {
             tile_size: grid.size,
             resumed,
             repaired: self.repaired.clone(),
+            warnings: vec![],
         }
     }
 }
