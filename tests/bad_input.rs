@@ -395,3 +395,24 @@ fn warnings_name_what_was_passed_over_or_assumed() {
     let (code, _, err) = crease(&["extract", near.to_str().unwrap(), "-o", d.path().join("run_near").to_str().unwrap(), "-q"]);
     assert_eq!((code, err.as_str()), (0, ""));
 }
+
+/// A LAS 1.4 point count whose size in bytes overflows 64 bits (2^62 records of 20 bytes wrap
+/// to 0): it passed the check against the file's length and panicked on a range index.
+#[test]
+fn a_point_count_whose_size_overflows() {
+    let d = tmp();
+    let p = d.path().join("huge_count.las");
+    let mut b = las::Builder::from((1, 4));
+    b.point_format = las::point::Format::new(0).unwrap();
+    let mut w = las::Writer::from_path(&p, b.into_header().unwrap()).unwrap();
+    for i in 0..10 {
+        w.write_point(las::Point { x: i as f64, y: 1.0, z: 2.0, ..Default::default() }).unwrap();
+    }
+    w.close().unwrap();
+    // LAS 1.4: legacy count at byte 107 (0 when the 64-bit count is used), 64-bit count at 247.
+    let mut bytes = std::fs::read(&p).unwrap();
+    bytes[107..111].copy_from_slice(&0u32.to_le_bytes());
+    bytes[247..255].copy_from_slice(&(1u64 << 62).to_le_bytes());
+    std::fs::write(&p, bytes).unwrap();
+    expect_error(&p, "header declares 4611686018427387904 points but the file holds only 10");
+}

@@ -114,8 +114,9 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
     }
     let count = header.number_of_points();
     if !compressed {
-        let need = offset_to_points + count * record_len as u64;
-        if need > bytes.len() as u64 {
+        // (A LAS 1.4 count near 2^64 times the record length overflows.)
+        let need = count.checked_mul(record_len as u64).and_then(|n| n.checked_add(offset_to_points));
+        if need.is_none_or(|n| n > bytes.len() as u64) {
             let holds = bytes.len() as u64 - offset_to_points.min(bytes.len() as u64);
             return Err(Error::input(
                 path,
