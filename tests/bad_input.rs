@@ -416,3 +416,15 @@ fn a_point_count_whose_size_overflows() {
     std::fs::write(&p, bytes).unwrap();
     expect_error(&p, "header declares 4611686018427387904 points but the file holds only 10");
 }
+
+/// A binary PLY whose element before the vertices declares 2^62 records of 4 bytes: their size
+/// wrapped to 0, and the vertices were read from the wrong place without a word.
+#[test]
+fn a_ply_element_whose_size_overflows() {
+    let d = tmp();
+    let p = d.path().join("faces.ply");
+    let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement face 4611686018427387904\nproperty int a\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec();
+    bytes.extend_from_slice(&[0; 64]);
+    std::fs::write(&p, bytes).unwrap();
+    expect_error(&p, "truncated PLY data in element 'face'");
+}

@@ -218,8 +218,9 @@ impl PlyReader {
         }
         if enc != Encoding::Ascii {
             if let Some(sz) = vertex.fixed_size() {
-                let need = pos as u64 + vertex.count * sz as u64;
-                if need > map.len() as u64 {
+                // (A count near 2^64 times the record size overflows.)
+                let need = vertex.count.checked_mul(sz as u64).and_then(|n| n.checked_add(pos as u64));
+                if need.is_none_or(|n| n > map.len() as u64) {
                     return Err(bad(
                         path,
                         format!("header declares {} vertices but the file holds only {} (truncated)", vertex.count, (map.len() - pos.min(map.len())) / sz),
@@ -355,6 +356,10 @@ fn next_token<'a>(map: &'a [u8], pos: &mut usize) -> Option<&'a [u8]> {
 
 fn skip_element(path: &Path, map: &[u8], enc: Encoding, e: &Element, mut pos: usize) -> Result<usize> {
     let trunc = || bad(path, format!("truncated PLY data in element '{}'", e.name));
+    if e.props.is_empty() {
+        // (Nothing is stored, however many there are: counting them out would never end.)
+        return Ok(pos);
+    }
     if enc == Encoding::Ascii {
         for _ in 0..e.count {
             for p in &e.props {
@@ -370,7 +375,8 @@ fn skip_element(path: &Path, map: &[u8], enc: Encoding, e: &Element, mut pos: us
         return Ok(pos);
     }
     if let Some(sz) = e.fixed_size() {
-        return Ok(pos + e.count as usize * sz);
+        let end = e.count.checked_mul(sz as u64).and_then(|n| n.checked_add(pos as u64)).filter(|&end| end <= map.len() as u64);
+        return end.map(|end| end as usize).ok_or_else(trunc);
     }
     for _ in 0..e.count {
         for p in &e.props {
