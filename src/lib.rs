@@ -28,6 +28,7 @@
 
 pub mod cancel;
 pub(crate) mod codec;
+pub mod crs;
 pub mod curves;
 pub mod debug;
 pub mod error;

@@ -61,43 +61,7 @@ impl Bounds {
     }
 }
 
-/// The coordinate reference system of a cloud, as stored in the file.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Crs {
-    /// OGC WKT, if the file carries one.
-    pub wkt: Option<String>,
-    /// EPSG code of the projected (or else geographic) CRS from GeoTIFF keys, if any.
-    pub epsg: Option<u16>,
-}
-
-impl Crs {
-    /// True if the file says nothing about its CRS.
-    pub fn is_unknown(&self) -> bool {
-        self.wkt.is_none() && self.epsg.is_none()
-    }
-
-    /// True if two known CRS are the same one: the same EPSG code where both have one (a file
-    /// may add a WKT to the code another file gives alone), else the same WKT.
-    pub fn agrees(&self, other: &Crs) -> bool {
-        match (self.epsg, other.epsg) {
-            (Some(a), Some(b)) => a == b,
-            _ => self.wkt == other.wkt && self.epsg == other.epsg,
-        }
-    }
-
-    /// One-line description for humans.
-    pub fn summary(&self) -> String {
-        match (&self.epsg, &self.wkt) {
-            (Some(code), _) => format!("EPSG:{code}"),
-            (None, Some(wkt)) => {
-                // The name is the first quoted string of the WKT.
-                let name = wkt.split('"').nth(1).unwrap_or("WKT");
-                format!("WKT \"{name}\"")
-            }
-            (None, None) => "unknown".to_string(),
-        }
-    }
-}
+pub use crate::crs::Crs;
 
 /// The file formats crease reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -204,20 +168,4 @@ pub struct TilePoints {
     pub xyz: Vec<DVec3>,
     /// Global ids.
     pub gid: Vec<u64>,
-}
-
-#[cfg(test)]
-mod tests {
-    use super::Crs;
-
-    #[test]
-    fn crs_with_the_same_epsg_agree_with_or_without_a_wkt() {
-        let code = Crs { wkt: None, epsg: Some(32104) };
-        let both = Crs { wkt: Some("PROJCS[\"NAD83 / Texas Central\"]".into()), epsg: Some(32104) };
-        let other = Crs { wkt: None, epsg: Some(4326) };
-        let wkt_only = Crs { wkt: Some("PROJCS[\"x\"]".into()), epsg: None };
-        assert!(code.agrees(&both) && both.agrees(&code));
-        assert!(!code.agrees(&other) && !both.agrees(&other));
-        assert!(wkt_only.agrees(&wkt_only.clone()) && !wkt_only.agrees(&code));
-    }
 }

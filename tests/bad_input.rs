@@ -316,6 +316,25 @@ fn laz_headers_that_disagree_with_their_data() {
     }
 }
 
+/// A layered LAZ chunk (point formats 6-10) whose first layer declares 4 GB: the decoder
+/// allocated and zeroed it before finding the data short (4 GB of RSS for a 12 kB file; the
+/// fuzzer's find). Exit 2, one line, at once.
+#[test]
+#[ignore = "needs ../shared"]
+fn a_laz_layer_larger_than_its_chunk() {
+    let mut bytes = std::fs::read(shared("1_4_w_evlr.laz")).unwrap();
+    // The first chunk follows the 8-byte chunk table offset: the first point raw (the record
+    // length, header byte 105), the point count, then the layer sizes.
+    let data = u32::from_le_bytes(bytes[96..100].try_into().unwrap()) as usize;
+    let record_len = u16::from_le_bytes([bytes[105], bytes[106]]) as usize;
+    let at = data + 8 + record_len + 4;
+    bytes[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    let d = tmp();
+    let p = d.path().join("layer.laz");
+    std::fs::write(&p, bytes).unwrap();
+    expect_error(&p, "chunk 0 declares");
+}
+
 /// An EVLR whose declared length runs past the end of the file: the `las` crate allocated the
 /// declared length (27 TB in the case the fuzzer found) before reading it.
 #[test]

@@ -140,7 +140,7 @@ fn obj_curves_round_trip_positions_ids_and_shared_corners() {
 fn geojson_carries_crs_and_coordinates() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path().join("c.geojson");
-    let crs = crease::points::Crs { wkt: Some("PROJCS[\"x\"]".into()), epsg: Some(2154) };
+    let crs = crease::points::Crs { wkt: Some("PROJCS[\"x\"]".into()), epsg: Some(2154), ..Default::default() };
     write_geojson(&p, &sample_curves(), &crs).unwrap();
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     assert_eq!(v["crs"]["properties"]["name"], "urn:ogc:def:crs:EPSG::2154");

@@ -67,10 +67,22 @@ fn las_and_laz_agree() {
 #[ignore = "needs ../shared"]
 fn crs_is_read() {
     let dir = real_dir();
+    // The WKT bit is set: the WKT (US feet, no code) rules over the GeoTIFF keys' EPSG:32104
+    // (metres), which a GIS would have placed the curves by.
     let h = read_header(&dir.join("file_with_both_wkt_and_geotiff_vlrs.las")).unwrap();
-    assert!(h.crs.wkt.is_some() && h.crs.epsg.is_some());
+    assert!(h.crs.wkt.as_deref().unwrap().starts_with("PROJCS[\"NAD83_2011_Nebraska_ft\""));
+    assert_eq!((h.crs.epsg, h.crs.horizontal_unit.as_deref()), (None, Some("Foot_US")));
+    // Codes from the WKT's root AUTHORITY (a compound WKT1: its horizontal part's) or ID (WKT2).
     let h = read_header(&dir.join("las_with_several_extra_byte_bloc.laz")).unwrap();
-    assert_eq!(h.crs.epsg, Some(2154));
+    assert_eq!((h.crs.epsg, h.crs.horizontal_unit.as_deref()), (Some(2154), Some("metre")));
+    let h = read_header(&dir.join("1_4_w_evlr.laz")).unwrap();
+    assert_eq!((h.crs.epsg, h.crs.horizontal_unit.as_deref(), h.crs.vertical_unit.as_deref()), (Some(2903), Some("US survey foot"), Some("US survey foot")));
+    let h = read_header(&dir.join("fullwave.laz")).unwrap();
+    assert_eq!(h.crs.epsg, Some(32723));
+    // GeoTIFF keys that name no code (user-defined) beside a WKT: the WKT.
+    let h = read_header(&dir.join("autzen_trim.laz")).unwrap();
+    assert_eq!((h.crs.epsg, h.crs.horizontal_unit.as_deref()), (None, Some("foot")));
+    assert!(h.crs.wkt.as_deref().unwrap().contains("NAD_1983_HARN_Lambert_Conformal_Conic"));
     let h = read_header(&dir.join("plane.laz")).unwrap();
     assert!(h.crs.is_unknown());
 }

@@ -158,7 +158,7 @@ fn scene_is_exact_in_count_and_carries_crs() {
     assert_eq!(n, 300_000);
     let h = read_header(&out).unwrap();
     assert_eq!(h.count, 300_000);
-    assert_eq!(h.crs.epsg, Some(synth::scene::EPSG));
+    assert_eq!(h.crs.epsg, Some(u32::from(synth::scene::EPSG)));
     let pts = PointReader::open(&out, &Filter::default()).unwrap().read_all().unwrap();
     assert!(pts.class.contains(&6) && pts.class.contains(&2));
     let truth = read_obj(&synth::truth_path(&out)).unwrap();

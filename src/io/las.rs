@@ -79,6 +79,7 @@ struct Parsed {
     offset_to_points: u64,
     layout: Layout,
     compressed: bool,
+    crs: Crs,
 }
 
 fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
@@ -102,7 +103,7 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
     let offset_to_points = raw.offset_to_point_data as u64;
     let record_len = raw.point_data_record_length as usize;
     // (The `las` crate allocates what an EVLR declares before reading it.)
-    check_evlrs(path, bytes, &raw)?;
+    let evlrs = evlrs(path, bytes, &raw)?;
     let header = las::Header::new(Cursor::new(bytes)).map_err(|e| las_error(path, e))?;
     let base_len = {
         let mut f = *header.point_format();
@@ -128,7 +129,10 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
         check_laz(path, bytes, &header, offset_to_points, record_len)?;
     }
     let layout = Layout { record_len, extended: fmt >= 6, scale, offset };
-    Ok(Parsed { header, offset_to_points, layout, compressed })
+    let records = header.vlrs().iter().map(|v| (v.user_id.as_str(), v.record_id, &v.data[..]));
+    let records = records.chain(evlrs.iter().map(|(user, id, r)| (user.as_str(), *id, &bytes[r.clone()])));
+    let crs = Crs::from_las_records(records, raw.global_encoding & 0x10 != 0);
+    Ok(Parsed { header, offset_to_points, layout, compressed, crs })
 }
 
 /// Reads a little-endian integer of `N` bytes at `at`, if the file holds it.
@@ -137,29 +141,35 @@ fn le<const N: usize>(bytes: &[u8], at: u64) -> Option<[u8; N]> {
     bytes.get(at..at.checked_add(N)?)?.try_into().ok()
 }
 
-/// Checks that each EVLR lies within the file: a header whose EVLRs run past its end is
-/// truncated or corrupt.
-fn check_evlrs(path: &Path, bytes: &[u8], raw: &las::raw::Header) -> Result<()> {
+/// Where each EVLR lies, as (user id, record id, data range), checked against the file's
+/// length: a header whose EVLRs run past its end is truncated or corrupt. (The `las` crate
+/// reads only the first; a COPC file puts its hierarchy there and its CRS after it.)
+fn evlrs(path: &Path, bytes: &[u8], raw: &las::raw::Header) -> Result<Vec<(String, u16, std::ops::Range<usize>)>> {
     const EVLR_HEADER: u64 = 60;
     let Some(e) = raw.evlr.filter(|e| e.start_of_first_evlr > 0 && e.number_of_evlrs > 0) else {
-        return Ok(());
+        return Ok(vec![]);
     };
     let len = bytes.len() as u64;
     let mut at = e.start_of_first_evlr;
+    let mut out = vec![];
     for k in 0..e.number_of_evlrs {
-        let Some(size) = le::<8>(bytes, at.saturating_add(20)).map(u64::from_le_bytes) else {
+        let data = at.saturating_add(EVLR_HEADER);
+        let Some(size) = le::<8>(bytes, at.saturating_add(20)).map(u64::from_le_bytes).filter(|_| data <= len) else {
             return Err(Error::input(path, format!("EVLR {} of {} starts at byte {at}, past the end of the file ({len} bytes)", k + 1, e.number_of_evlrs)));
         };
-        let data = at + EVLR_HEADER;
-        if size > len.saturating_sub(data) {
+        if size > len - data {
             return Err(Error::input(
                 path,
-                format!("EVLR {} of {} declares {size} bytes but the file ends {} bytes after its start", k + 1, e.number_of_evlrs, len.saturating_sub(data)),
+                format!("EVLR {} of {} declares {size} bytes but the file ends {} bytes after its start", k + 1, e.number_of_evlrs, len - data),
             ));
         }
+        // (In bounds: the header's 60 bytes and the data lie within the file.)
+        let (a, d) = (at as usize, data as usize);
+        let user = String::from_utf8_lossy(&bytes[a + 2..a + 18]).trim_end_matches('\0').to_string();
+        out.push((user, u16::from_le_bytes([bytes[a + 18], bytes[a + 19]]), d..d + size as usize));
         at = data + size;
     }
-    Ok(())
+    Ok(out)
 }
 
 /// Checks a LAZ file's laszip record and chunk table against the file before the `laz` crate
@@ -196,18 +206,49 @@ fn check_laz(path: &Path, bytes: &[u8], header: &las::Header, data_start: u64, r
     if count as u64 > table_at - data_start {
         return Err(Error::input(path, format!("the chunk table declares {count} chunks in {} bytes of compressed points", table_at - data_start)));
     }
+    // Layered chunks (point formats 6-10) declare the size of each layer, which the decoder
+    // allocates before reading it (4 GB for a flipped byte): check them against the chunk.
+    let layer_words: usize = table
+        .chunks_exact(6)
+        .map(|it| match u16::from_le_bytes([it[0], it[1]]) {
+            10 => 9, // Point14: nine layers
+            11 | 13 => 1,
+            12 => 2, // RGB and NIR
+            14 => u16::from_le_bytes([it[2], it[3]]) as usize,
+            _ => 0,
+        })
+        .sum();
+    if layer_words > 0 {
+        check_layers(path, bytes, d, data_start, table_at, record_len, layer_words)?;
+    }
     Ok(())
 }
 
-fn crs_of(header: &las::Header) -> Crs {
-    let wkt = header.get_wkt_crs_bytes().map(|b| String::from_utf8_lossy(b).trim_end_matches('\0').trim().to_string()).filter(|s| !s.is_empty());
-    // A malformed GeoTIFF key directory only loses the EPSG code, not the file.
-    let epsg = header
-        .get_geotiff_crs()
-        .ok()
-        .flatten()
-        .and_then(|g| g.get_projected_crs_geo_key_value().or_else(|| g.get_geodetic_crs_geo_key_value()).filter(|&c| c != 0 && c != 32767));
-    Crs { wkt, epsg }
+/// Checks that the layers each chunk declares fit in the chunk (see [`check_laz`]). A chunk
+/// opens with its first point, raw, the number of points, and one size per layer.
+fn check_layers(path: &Path, bytes: &[u8], vlr: &[u8], data_start: u64, table_at: u64, record_len: usize, words: usize) -> Result<()> {
+    let bad = |what: String| Error::input(path, format!("corrupt compressed point data: {what}"));
+    let vlr = laz::LazVlr::from_buffer(vlr).map_err(|e| bad(format!("unreadable laszip record ({e})")))?;
+    let mut src = Cursor::new(bytes);
+    src.set_position(data_start);
+    let chunks = laz::laszip::ChunkTable::read_from(&mut src, &vlr).map_err(|e| bad(format!("unreadable chunk table ({e})")))?;
+    let mut at = data_start + 8;
+    for (k, c) in chunks.as_ref().iter().enumerate() {
+        let end = at.checked_add(c.byte_count).filter(|&e| e <= table_at).ok_or_else(|| bad(format!("chunk {k} runs past the chunk table")))?;
+        let sizes_at = at + record_len as u64 + 4;
+        let layers_at = sizes_at + 4 * words as u64;
+        if c.byte_count > 0 && layers_at > end {
+            return Err(bad(format!("chunk {k} ({} bytes) is shorter than its header", c.byte_count)));
+        }
+        if c.byte_count > 0 {
+            let declared: u64 = (0..words as u64).map(|w| le::<4>(bytes, sizes_at + 4 * w).map_or(0, |b| u32::from_le_bytes(b) as u64)).sum();
+            if declared > end - layers_at {
+                return Err(bad(format!("chunk {k} declares {declared} bytes of layers in {}", end - layers_at)));
+            }
+        }
+        at = end;
+    }
+    Ok(())
 }
 
 fn cloud_header(path: &Path, p: &Parsed) -> Result<CloudHeader> {
@@ -222,7 +263,7 @@ fn cloud_header(path: &Path, p: &Parsed) -> Result<CloudHeader> {
         point_format: Some(fmt),
         count: h.number_of_points(),
         bounds,
-        crs: crs_of(h),
+        crs: p.crs.clone(),
         precision: Precision::Scaled(p.layout.scale.max_element()),
     })
 }
