@@ -38,7 +38,7 @@ impl DebugDump {
     /// Writes polylines (world coordinates) to `name` as OBJ.
     pub fn polylines(&self, name: &str, curves: &[crate::curves::Polyline]) {
         if let Some(dir) = &self.dir {
-            let _ = std::fs::create_dir_all(dir).is_ok().then(|| crate::curves::write_obj(&dir.join(name), curves));
+            let _ = std::fs::create_dir_all(dir).is_ok().then(|| crate::curves::write_obj(&dir.join(name), curves, &Default::default()));
         }
     }
 }

@@ -30,10 +30,11 @@ impl FilterArgs {
     }
 }
 
-/// Method parameters; lengths in model units (defaults are multiples of the spacing kappa).
+/// Method parameters; lengths in model units, the input CRS's horizontal unit (`crease info`
+/// names it; defaults are multiples of the spacing kappa).
 #[derive(Args, Clone)]
 struct ParamArgs {
-    /// Point spacing kappa (default: median nearest-neighbour distance).
+    /// Point spacing kappa, in model units (default: median nearest-neighbour distance).
     #[arg(long)]
     kappa: Option<f64>,
     /// Candidate fit radius (default 6 kappa).
@@ -148,6 +149,10 @@ enum Cmd {
         /// Leave out curves shorter than this, in model units.
         #[arg(long, default_value_t = 0.0)]
         min_length: f64,
+        /// The outputs' CRS, whatever the inputs say: EPSG:N or a WKT (an output setting, as
+        /// --min-confidence; no reprojection).
+        #[arg(long, value_name = "EPSG:N|WKT", value_parser = parse_crs)]
+        a_srs: Option<Box<crease::crs::Crs>>,
     },
     /// Tells what a run directory has done and what is left.
     Status {
@@ -306,6 +311,10 @@ fn read_curves(path: &std::path::Path) -> Result<Vec<crease::curves::Polyline>, 
     }
 }
 
+fn parse_crs(s: &str) -> Result<Box<crease::crs::Crs>, String> {
+    crease::crs::Crs::parse_user(s).map(Box::new).map_err(|e| e.to_string())
+}
+
 fn warn(msg: &str) {
     eprintln!("crease: warning: {msg}");
 }
@@ -362,8 +371,9 @@ fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Cmd::Synth { what } => synth_cmd(what)?,
-        Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length } => {
-            let args = ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length };
+        Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length, a_srs } => {
+            let args =
+                ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length, a_srs };
             extract_cmd(args)?
         }
         Cmd::Status { dir, json } => {
@@ -393,10 +403,11 @@ struct ExtractArgs {
     debug_dir: Option<PathBuf>,
     min_confidence: f64,
     min_length: f64,
+    a_srs: Option<Box<crease::crs::Crs>>,
 }
 
 fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
-    let ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length } = a;
+    let ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length, a_srs } = a;
     if !(0.0..=1.0).contains(&min_confidence) {
         return Err(Error::Usage("--min-confidence must be between 0 and 1".into()));
     }
@@ -427,6 +438,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         min_confidence,
         min_length,
         warn,
+        assign_crs: a_srs.map(|c| *c),
     };
     let params = params.params()?;
     let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {

@@ -108,7 +108,7 @@ fn ply_curves_round_trip_exactly() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path().join("c.ply");
     let curves = sample_curves();
-    write_ply(&p, &curves).unwrap();
+    write_ply(&p, &curves, &Default::default()).unwrap();
     assert_eq!(read_ply(&p).unwrap(), curves);
 }
 
@@ -117,7 +117,7 @@ fn obj_curves_round_trip_positions_ids_and_shared_corners() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path().join("c.obj");
     let curves = sample_curves();
-    write_obj(&p, &curves).unwrap();
+    write_obj(&p, &curves, &Default::default()).unwrap();
     let back = read_obj(&p).unwrap();
     assert_eq!(back.len(), curves.len());
     for (a, b) in curves.iter().zip(&back) {
@@ -159,7 +159,7 @@ fn ply_without_confidence_still_reads() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path().join("c.ply");
     let curves = sample_curves();
-    write_ply(&p, &curves).unwrap();
+    write_ply(&p, &curves, &Default::default()).unwrap();
     // Rewrite as the older layout: no confidence property, 4 bytes fewer a vertex.
     let bytes = std::fs::read(&p).unwrap();
     let end = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;

@@ -1,7 +1,8 @@
 //! GeoJSON output: one `LineString` feature per curve, with 3D coordinates in the input's own
 //! (usually projected) CRS. RFC 7946 assumes WGS 84; crease does not reproject, so it names the
 //! CRS with the 2008 GeoJSON `crs` member (EPSG code, understood by GDAL/QGIS) and also keeps
-//! the full WKT in a `crs_wkt` member when the input carries one.
+//! the full WKT in a `crs_wkt` member when the input carries one, and the units in `crs_units`
+//! (GDAL reads the `crs` member only; a CRS without an EPSG code reaches it through no member).
 
 use super::Polyline;
 use crate::error::{Error, Result};
@@ -21,6 +22,9 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
     }
     if let Some(wkt) = &crs.wkt {
         head.insert("crs_wkt".into(), json!(wkt));
+    }
+    if crs.horizontal_unit.is_some() || crs.vertical_unit.is_some() {
+        head.insert("crs_units".into(), json!({"horizontal": crs.horizontal_unit, "vertical": crs.vertical_unit}));
     }
     let features: Vec<Value> = curves
         .iter()

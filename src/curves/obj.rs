@@ -3,6 +3,7 @@
 //! Corner vertices shared by several curves are written once and referenced by each.
 
 use super::{Polyline, Vertex};
+use crate::crs::Crs;
 use crate::error::{io_input, Error, Result};
 use glam::DVec3;
 use std::collections::HashMap;
@@ -16,18 +17,21 @@ use std::path::Path;
 /// use glam::DVec3;
 ///
 /// let path = std::env::temp_dir().join("crease-doc-curves.obj");
-/// write_obj(&path, &[Polyline::from_points(0, [DVec3::ZERO, DVec3::X, DVec3::ONE])])?;
+/// write_obj(&path, &[Polyline::from_points(0, [DVec3::ZERO, DVec3::X, DVec3::ONE])], &Default::default())?;
 /// assert_eq!(read_obj(&path)?[0].vertices.len(), 3);
 /// # Ok::<(), crease::Error>(())
 /// ```
-pub fn write_obj(path: &Path, curves: &[Polyline]) -> Result<()> {
+pub fn write_obj(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);
-    write_obj_to(&mut w, curves).and_then(|_| w.flush()).map_err(|e| Error::output(path, e))
+    write_obj_to(&mut w, curves, crs).and_then(|_| w.flush()).map_err(|e| Error::output(path, e))
 }
 
-fn write_obj_to(w: &mut impl Write, curves: &[Polyline]) -> std::io::Result<()> {
+fn write_obj_to(w: &mut impl Write, curves: &[Polyline], crs: &Crs) -> std::io::Result<()> {
     writeln!(w, "# crease feature curves: {} polylines", curves.len())?;
+    if !crs.is_unknown() {
+        writeln!(w, "# crs {}", crs.summary().replace(['\n', '\r'], " "))?;
+    }
     // Vertex table; corners with identical positions are shared.
     let mut corner_index: HashMap<[u64; 3], usize> = HashMap::new();
     let mut lines: Vec<Vec<usize>> = Vec::with_capacity(curves.len());

@@ -5,6 +5,7 @@
 //! too.)
 
 use super::{Polyline, Vertex};
+use crate::crs::Crs;
 use crate::error::{io_input, Error, Result};
 use glam::{DVec3, Vec3};
 use std::io::{BufWriter, Write};
@@ -18,17 +19,19 @@ const CONFIDENCE: &str = "property float confidence\n";
 const VERTEX_BYTES: usize = 3 * 8 + 6 * 4 + 4 + 1 + 4;
 
 /// Writes `curves` to `path` as binary little-endian PLY.
-pub fn write_ply(path: &Path, curves: &[Polyline]) -> Result<()> {
+pub fn write_ply(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);
     let nv: usize = curves.iter().map(|c| c.vertices.len()).sum();
     let ne: usize = curves.iter().map(|c| c.segment_count()).sum();
     let r = (|| -> std::io::Result<()> {
-        write!(
-            w,
-            "ply\nformat binary_little_endian 1.0\ncomment crease feature curves\n\
-             element vertex {nv}\n{HEADER}{CONFIDENCE}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n"
-        )?;
+        write!(w, "ply\nformat binary_little_endian 1.0\ncomment crease feature curves\n")?;
+        if !crs.is_unknown() {
+            // (A comment line ends at the line's end: the WKT, which may span lines, is left to
+            // the GeoJSON.)
+            writeln!(w, "comment crs {}", crs.summary().replace(['\n', '\r'], " "))?;
+        }
+        write!(w, "element vertex {nv}\n{HEADER}{CONFIDENCE}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n")?;
         for c in curves {
             for v in &c.vertices {
                 for x in v.p.to_array() {

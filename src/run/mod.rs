@@ -71,6 +71,8 @@ pub struct RunOptions {
     pub min_length: f64,
     /// Called with each warning as it is found (they are also listed in the report).
     pub warn: fn(&str),
+    /// The CRS of the outputs whatever the inputs say (an output setting, as `--a-srs`).
+    pub assign_crs: Option<Crs>,
 }
 
 impl Default for RunOptions {
@@ -86,6 +88,7 @@ impl Default for RunOptions {
             min_confidence: polylines::DEFAULT_MIN_CONFIDENCE,
             min_length: 0.0,
             warn: |_| {},
+            assign_crs: None,
         }
     }
 }
@@ -134,6 +137,8 @@ pub struct Report {
     /// What the run found doubtful but went on with (files passed over, a CRS assumed, header
     /// bounds replaced, coarse coordinates).
     pub warnings: Vec<String>,
+    /// The outputs' CRS, with its units (lengths in this report are in the horizontal unit).
+    pub crs: Crs,
 }
 
 /// Seconds per pass.
@@ -207,8 +212,19 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     };
     let first = first.clone();
     let headers = files.iter().map(|f| io::read_header(f)).collect::<Result<Vec<_>>>()?;
-    let (crs, crs_warnings) = common_crs(&headers)?;
-    warnings.extend(crs_warnings);
+    let crs = match &opts.assign_crs {
+        Some(assigned) => {
+            for h in headers.iter().filter(|h| !h.crs.is_unknown() && !h.crs.agrees(assigned)) {
+                warnings.push(format!("{}: its CRS {} is replaced by the one assigned, {}", h.path.display(), h.crs.summary(), assigned.summary()));
+            }
+            assigned.clone()
+        }
+        None => {
+            let (crs, crs_warnings) = common_crs(&headers)?;
+            warnings.extend(crs_warnings);
+            crs
+        }
+    };
     for h in headers.iter().filter(|h| h.format != crate::points::FileFormat::Ply && !h.bounds.is_usable()) {
         warnings.push(format!("{}: the header's bounds are not usable (not finite or inverted); bounds come from the points", h.path.display()));
     }
@@ -247,6 +263,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     run.write(&curves, &crs)?;
     let mut report = run.report(files, r, tau, counts, seconds, t0, resumed);
     report.warnings = warnings.into_list();
+    report.crs = crs;
     run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
     Ok(report)
 }
@@ -739,6 +756,7 @@ impl<'a> Run<'a> {
             resumed,
             repaired: self.repaired.clone(),
             warnings: vec![],
+            crs: Crs::default(),
         }
     }
 }
@@ -749,8 +767,8 @@ fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs, samp
     std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
     let (written, preview) = rayon::join(
         || {
-            write_obj(&tmp.join("curves.obj"), curves)?;
-            write_ply(&tmp.join("curves.ply"), curves)?;
+            write_obj(&tmp.join("curves.obj"), curves, crs)?;
+            write_ply(&tmp.join("curves.ply"), curves, crs)?;
             write_geojson(&tmp.join("curves.geojson"), curves, crs)
         },
         || crate::preview::write_png(&tmp.join("preview.png"), sample, curves),

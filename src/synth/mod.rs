@@ -172,6 +172,6 @@ pub fn write_sampled(shape: &Shape, opts: &SynthOptions, out: &Path) -> Result<u
     let mut w = PointWriter::create(out, &wopts)?;
     w.write(&pts, &vec![1u8; pts.len()])?;
     w.finish()?;
-    write_obj(&truth_path(out), &truth_polylines(&shape.truth))?;
+    write_obj(&truth_path(out), &truth_polylines(&shape.truth), &Default::default())?;
     Ok(pts.len())
 }

@@ -268,6 +268,6 @@ pub fn write_scene(opts: &SceneOptions, out: &Path) -> Result<u64> {
         }
     }
     w.finish()?;
-    write_obj(&super::truth_path(out), &truth_polylines(&truth))?;
+    write_obj(&super::truth_path(out), &truth_polylines(&truth), &crate::crs::Crs { epsg: Some(EPSG.into()), ..Default::default() })?;
     Ok(written)
 }

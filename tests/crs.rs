@@ -1,0 +1,70 @@
+//! CRS: read from every VLR and EVLR, named with its units in every output, and assigned with
+//! `--a-srs`.
+
+use std::path::Path;
+use std::process::Command;
+
+fn crease(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(args).output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+const WKT: &str = r#"PROJCS["ETRS89 / UTM zone 32N",GEOGCS["ETRS89",DATUM["European_Terrestrial_Reference_System_1989",SPHEROID["GRS 1980",6378137,298.257222101]],PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433]],PROJECTION["Transverse_Mercator"],UNIT["metre",1],AXIS["Easting",EAST],AXIS["Northing",NORTH],AUTHORITY["EPSG","25832"]]"#;
+
+/// A LAS 1.4 cube whose WKT is in its second EVLR (a COPC file puts its hierarchy first).
+fn cube_with_wkt_in_a_later_evlr(path: &Path) {
+    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let mut b = las::Builder::from((1, 4));
+    b.point_format = las::point::Format::new(6).unwrap();
+    b.transforms = las::Vector {
+        x: las::Transform { scale: 1e-5, offset: 0.0 },
+        y: las::Transform { scale: 1e-5, offset: 0.0 },
+        z: las::Transform { scale: 1e-5, offset: 0.0 },
+    };
+    b.evlrs.push(las::Vlr { user_id: "copc".into(), record_id: 1000, description: "hierarchy".into(), data: vec![0; 64] });
+    b.evlrs.push(las::Vlr { user_id: "LASF_Projection".into(), record_id: 2112, description: "OGC WKT".into(), data: WKT.as_bytes().to_vec() });
+    let mut w = las::Writer::from_path(path, b.into_header().unwrap()).unwrap();
+    for p in &cube {
+        w.write_point(las::Point { x: p.x, y: p.y, z: p.z, gps_time: Some(0.0), ..Default::default() }).unwrap();
+    }
+    w.close().unwrap();
+    // The WKT bit of the global encoding (byte 6, bit 4), which point formats 6-10 require.
+    let mut bytes = std::fs::read(path).unwrap();
+    bytes[6] |= 0x10;
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn a_wkt_in_a_later_evlr_names_every_output() {
+    let d = tempfile::tempdir().unwrap();
+    let cloud = d.path().join("cube.las");
+    cube_with_wkt_in_a_later_evlr(&cloud);
+    let h = crease::io::read_header(&cloud).unwrap();
+    assert_eq!((h.crs.epsg, h.crs.horizontal_unit.as_deref()), (Some(25832), Some("metre")));
+    let run = d.path().join("run");
+    let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    let summary = "EPSG:25832 (units: metre)";
+    let geojson: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("curves.geojson")).unwrap()).unwrap();
+    assert_eq!(geojson["crs"]["properties"]["name"], "urn:ogc:def:crs:EPSG::25832");
+    assert_eq!(geojson["crs_wkt"], WKT);
+    assert_eq!(geojson["crs_units"]["horizontal"], "metre");
+    assert!(std::fs::read_to_string(run.join("curves.obj")).unwrap().contains(&format!("\n# crs {summary}\n")));
+    let ply = std::fs::read(run.join("curves.ply")).unwrap();
+    assert!(String::from_utf8_lossy(&ply[..400]).contains(&format!("\ncomment crs {summary}\n")));
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("report.json")).unwrap()).unwrap();
+    assert_eq!((report["crs"]["epsg"].as_u64(), report["crs"]["horizontal_unit"].as_str()), (Some(25832), Some("metre")));
+    // The curves still read back.
+    assert_eq!(crease::curves::read_ply(&run.join("curves.ply")).unwrap().len(), 12);
+    assert_eq!(crease::curves::read_obj(&run.join("curves.obj")).unwrap().len(), 12);
+
+    // --a-srs: the outputs carry the assigned CRS, and the replaced one is named in a warning.
+    let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q", "--a-srs", "EPSG:4258"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("cube.las: its CRS EPSG:25832 (units: metre) is replaced by the one assigned, EPSG:4258"), "{err}");
+    let geojson: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("curves.geojson")).unwrap()).unwrap();
+    assert_eq!(geojson["crs"]["properties"]["name"], "urn:ogc:def:crs:EPSG::4258");
+    let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "--a-srs", "UTM 32"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("neither EPSG:N nor a WKT"), "{err}");
+}
