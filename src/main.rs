@@ -89,6 +89,9 @@ enum Cmd {
         /// Files or directories (all .las, .laz, .ply inside, sorted).
         #[arg(required = true)]
         paths: Vec<PathBuf>,
+        /// Search directories' subdirectories too.
+        #[arg(long, short)]
+        recursive: bool,
         /// Machine-readable JSON output.
         #[arg(long)]
         json: bool,
@@ -98,6 +101,9 @@ enum Cmd {
         /// Files or directories.
         #[arg(required = true)]
         paths: Vec<PathBuf>,
+        /// Search directories' subdirectories too.
+        #[arg(long, short)]
+        recursive: bool,
         #[command(flatten)]
         filter: FilterArgs,
         /// Machine-readable JSON output.
@@ -109,6 +115,12 @@ enum Cmd {
         /// Input files or directories (a directory is one cloud made of all its point files).
         #[arg(required = true)]
         paths: Vec<PathBuf>,
+        /// Search directories' subdirectories too.
+        #[arg(long, short)]
+        recursive: bool,
+        /// Print a JSON summary of each run on stdout (its outputs and report).
+        #[arg(long)]
+        json: bool,
         /// Output directory.
         #[arg(short, long)]
         out: PathBuf,
@@ -320,16 +332,16 @@ fn warn(msg: &str) {
 }
 
 /// The point files `paths` name (directories expanded), with a warning for what was passed over.
-fn input_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, Error> {
-    let inputs = crease::io::expand_inputs(paths)?;
+fn input_files(paths: &[PathBuf], recursive: bool) -> Result<Vec<PathBuf>, Error> {
+    let inputs = crease::io::expand_inputs(paths, recursive)?;
     inputs.warnings(|_| false).iter().for_each(|w| warn(w));
     Ok(inputs.files)
 }
 
 fn run(cli: Cli) -> Result<(), Error> {
     match cli.cmd {
-        Cmd::Info { paths, json } => {
-            let files = input_files(&paths)?;
+        Cmd::Info { paths, recursive, json } => {
+            let files = input_files(&paths, recursive)?;
             let infos = files.iter().map(|f| crease::info::file_info(f)).collect::<Result<Vec<_>, _>>()?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&infos).expect("info serialises"));
@@ -337,8 +349,8 @@ fn run(cli: Cli) -> Result<(), Error> {
                 print!("{}", crease::info::render_text(&infos));
             }
         }
-        Cmd::Scan { paths, filter, json } => {
-            let files = input_files(&paths)?;
+        Cmd::Scan { paths, recursive, filter, json } => {
+            let files = input_files(&paths, recursive)?;
             let t = Instant::now();
             let mut report = vec![];
             let mut total = 0u64;
@@ -371,9 +383,42 @@ fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Cmd::Synth { what } => synth_cmd(what)?,
-        Cmd::Extract { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length, a_srs } => {
-            let args =
-                ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length, a_srs };
+        Cmd::Extract {
+            paths,
+            out,
+            filter,
+            params,
+            threads,
+            memory,
+            tile_size,
+            force,
+            per_file,
+            quiet,
+            debug_dir,
+            min_confidence,
+            min_length,
+            a_srs,
+            recursive,
+            json,
+        } => {
+            let args = ExtractArgs {
+                paths,
+                out,
+                filter,
+                params,
+                threads,
+                memory,
+                tile_size,
+                force,
+                per_file,
+                quiet,
+                debug_dir,
+                min_confidence,
+                min_length,
+                a_srs,
+                recursive,
+                json,
+            };
             extract_cmd(args)?
         }
         Cmd::Status { dir, json } => {
@@ -404,10 +449,29 @@ struct ExtractArgs {
     min_confidence: f64,
     min_length: f64,
     a_srs: Option<Box<crease::crs::Crs>>,
+    recursive: bool,
+    json: bool,
 }
 
 fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
-    let ExtractArgs { paths, out, filter, params, threads, memory, tile_size, force, per_file, quiet, debug_dir, min_confidence, min_length, a_srs } = a;
+    let ExtractArgs {
+        recursive,
+        json,
+        paths,
+        out,
+        filter,
+        params,
+        threads,
+        memory,
+        tile_size,
+        force,
+        per_file,
+        quiet,
+        debug_dir,
+        min_confidence,
+        min_length,
+        a_srs,
+    } = a;
     if !(0.0..=1.0).contains(&min_confidence) {
         return Err(Error::Usage("--min-confidence must be between 0 and 1".into()));
     }
@@ -416,6 +480,11 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
     }
     if let Some(n) = threads {
         rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
+    }
+    if out.as_os_str() == "-" {
+        return Err(Error::Usage(
+            "-o -: crease writes a run directory of several files, not a stream; name a directory (use --json for a summary on stdout)".into(),
+        ));
     }
     if let Some(t) = tile_size {
         if !(t > 0.0 && t.is_finite()) {
@@ -439,10 +508,11 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         min_length,
         warn,
         assign_crs: a_srs.map(|c| *c),
+        recursive,
     };
     let params = params.params()?;
     let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {
-        input_files(&paths)?
+        input_files(&paths, recursive)?
             .into_iter()
             .map(|f| {
                 let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -452,8 +522,13 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
     } else {
         vec![(paths, out)]
     };
+    let mut summaries = vec![];
     for (inputs, dir) in jobs {
         let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter(), &opts)?;
+        if json {
+            let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).collect();
+            summaries.push(serde_json::json!({"dir": dir, "outputs": outputs, "report": r}));
+        }
         if !quiet {
             eprintln!(
                 "{} curves from {} points in {:.2} s ({} tiles{}; kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
@@ -470,6 +545,11 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
                 dir.display()
             );
         }
+    }
+    if json {
+        // One object for one run; an array with --per-file.
+        let v = if per_file { serde_json::Value::Array(summaries) } else { summaries.pop().unwrap_or_default() };
+        println!("{}", serde_json::to_string_pretty(&v).expect("summary serialises"));
     }
     Ok(())
 }

@@ -447,3 +447,29 @@ fn a_ply_element_whose_size_overflows() {
     std::fs::write(&p, bytes).unwrap();
     expect_error(&p, "truncated PLY data in element 'face'");
 }
+
+/// `--recursive` finds point files in subdirectories (without it the tree holds none at its
+/// top, a clear refusal); `--json` prints the run's summary on stdout; `-o -` is refused.
+#[test]
+fn recursive_directories_json_summaries_and_no_stream_output() {
+    let d = tmp();
+    let tree = d.path().join("tree");
+    std::fs::create_dir_all(tree.join("a/b")).unwrap();
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las"), tree.join("a/b/cube.las")).unwrap();
+    let (t, run) = (tree.to_str().unwrap(), d.path().join("run"));
+    let (code, _, err) = crease(&["extract", t, "-o", run.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("tree: directory holds no point files"), "{err}");
+    let (code, out, err) = crease(&["extract", t, "--recursive", "-o", run.to_str().unwrap(), "-q", "--json"]);
+    assert_eq!((code, err.as_str()), (0, ""));
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["report"]["counts"]["curves"], 12);
+    assert_eq!(v["report"]["inputs"][0].as_str().unwrap(), tree.join("a/b/cube.las").to_str().unwrap());
+    for o in v["outputs"].as_array().unwrap() {
+        assert!(Path::new(o.as_str().unwrap()).is_file(), "{o}");
+    }
+    let (code, _, err) = crease(&["extract", t, "-r", "-o", "-"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("-o -: crease writes a run directory"), "{err}");
+    assert!(!Path::new("-").exists());
+}

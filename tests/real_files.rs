@@ -15,7 +15,7 @@ fn real_dir() -> PathBuf {
 #[ignore = "needs ../shared"]
 fn header_counts_and_bounds_match_a_full_read() {
     let dir = real_dir();
-    let files = crease::io::expand_inputs(&[dir]).unwrap().files;
+    let files = crease::io::expand_inputs(&[dir], false).unwrap().files;
     assert_eq!(files.len(), 10, "expected the ten shared test files");
     for f in &files {
         let h = read_header(f).unwrap();

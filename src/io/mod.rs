@@ -83,12 +83,13 @@ impl Inputs {
             let names: Vec<String> = entries
                 .iter()
                 .filter(|e| !expected(e))
-                .map(|e| e.file_name().map(|n| n.to_string_lossy().into_owned() + if e.is_dir() { "/" } else { "" }).unwrap_or_default())
+                .map(|e| e.strip_prefix(dir).unwrap_or(e).to_string_lossy().into_owned() + if e.is_dir() { "/" } else { "" })
                 .collect();
             if !names.is_empty() {
                 let shown = names.iter().take(5).cloned().collect::<Vec<_>>().join(", ");
                 let more = if names.len() > 5 { format!(" and {} more", names.len() - 5) } else { String::new() };
-                out.push(format!("{}: passed over {} entries that are not point files (.las, .laz, .ply): {shown}{more}", dir.display(), names.len()));
+                let entries = if names.len() == 1 { "entry that is not a point file" } else { "entries that are not point files" };
+                out.push(format!("{}: passed over {} {entries} (.las, .laz, .ply): {shown}{more}", dir.display(), names.len()));
             }
         }
         out
@@ -96,24 +97,32 @@ impl Inputs {
 }
 
 /// Expands the user's paths: files are kept as given, directories are replaced by the point
-/// files (`.las`, `.laz`, `.ply`) directly inside them, sorted by name. Other files and
-/// subdirectories in a directory are passed over, and named in a warning.
-pub fn expand_inputs(paths: &[PathBuf]) -> Result<Inputs> {
+/// files (`.las`, `.laz`, `.ply`) inside them (`recursive`: in their subdirectories too),
+/// sorted by path. Other entries of a directory are passed over, and named in a warning.
+pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
     let mut out = Inputs::default();
     for p in paths {
         let meta = std::fs::metadata(p).map_err(|e| io_input(p, e))?;
         if meta.is_dir() {
             let (mut files, mut other) = (vec![], vec![]);
-            for e in std::fs::read_dir(p).map_err(|e| io_input(p, e))? {
-                let f = e.map_err(|e| io_input(p, e))?.path();
-                if f.is_file() && format_of(&f).is_some() {
-                    files.push(f);
-                } else {
-                    other.push(f);
+            let mut dirs = vec![p.clone()];
+            while let Some(dir) = dirs.pop() {
+                for e in std::fs::read_dir(&dir).map_err(|e| io_input(&dir, e))? {
+                    let e = e.map_err(|e| io_input(&dir, e))?;
+                    let f = e.path();
+                    // (A symbolic link to a directory is not followed: it may lead back up.)
+                    if recursive && e.file_type().is_ok_and(|t| t.is_dir()) {
+                        dirs.push(f);
+                    } else if f.is_file() && format_of(&f).is_some() {
+                        files.push(f);
+                    } else {
+                        other.push(f);
+                    }
                 }
             }
             if files.is_empty() {
-                return Err(Error::input(p, "directory holds no point files (.las, .laz, .ply)"));
+                let where_ = if recursive { "directory tree" } else { "directory" };
+                return Err(Error::input(p, format!("{where_} holds no point files (.las, .laz, .ply)")));
             }
             files.sort();
             out.files.extend(files);

@@ -73,6 +73,8 @@ pub struct RunOptions {
     pub warn: fn(&str),
     /// The CRS of the outputs whatever the inputs say (an output setting, as `--a-srs`).
     pub assign_crs: Option<Crs>,
+    /// Input directories are searched in their subdirectories too.
+    pub recursive: bool,
 }
 
 impl Default for RunOptions {
@@ -89,6 +91,7 @@ impl Default for RunOptions {
             min_length: 0.0,
             warn: |_| {},
             assign_crs: None,
+            recursive: false,
         }
     }
 }
@@ -198,11 +201,11 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     // (An input directory that is also the run directory holds the run's own curves.ply: a
     // second run would read it as points.)
     let run_dir = dir.canonicalize().ok();
-    let in_run_dir = |f: &Path| run_dir.is_some() && f.parent().and_then(|p| p.canonicalize().ok()) == run_dir;
-    let expanded = io::expand_inputs(inputs)?;
+    let in_run_dir = |f: &Path| run_dir.as_deref().is_some_and(|r| f.canonicalize().is_ok_and(|c| is_run_file(r, &c)));
+    let expanded = io::expand_inputs(inputs, opts.recursive)?;
     let mut warnings = Warnings::new(opts.warn);
     warnings.extend(expanded.warnings(in_run_dir));
-    let in_run_dir = |f: &PathBuf| in_run_dir(f) && f.file_name() == Some("curves.ply".as_ref());
+    let in_run_dir = |f: &PathBuf| in_run_dir(f);
     let files: Vec<PathBuf> = expanded.files.into_iter().filter(|f| !in_run_dir(f)).collect();
     let Some(first) = files.first() else {
         return match inputs.first() {
@@ -760,6 +763,18 @@ impl<'a> Run<'a> {
         }
     }
 }
+
+/// True if `f` (canonical) is a file or directory a run in `dir` (canonical) writes.
+fn is_run_file(dir: &Path, f: &Path) -> bool {
+    let Ok(rel) = f.strip_prefix(dir) else {
+        return false;
+    };
+    let top = rel.components().next().map(|c| c.as_os_str().to_string_lossy().into_owned()).unwrap_or_default();
+    [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "out.tmp", manifest::NAME, "lock"].contains(&top.as_str()) || OUTPUTS.contains(&top.as_str())
+}
+
+/// The files a finished run writes into its directory.
+pub const OUTPUTS: [&str; 5] = ["curves.obj", "curves.ply", "curves.geojson", "preview.png", "report.json"];
 
 fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs, sample: &[DVec3]) -> Result<()> {
     // Each output goes to a temporary name first, then is renamed into place.
