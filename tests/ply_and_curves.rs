@@ -150,10 +150,18 @@ fn geojson_carries_crs_and_coordinates() {
     assert_eq!(ring[0], ring[3]);
     assert_eq!(v["features"][0]["geometry"]["coordinates"][2][2], 1e7 + 0.123);
     assert_eq!(v["features"][0]["properties"]["confidence"], 0.8125);
+    // Scalar attributes only (Shapefile and FlatGeobuf refuse lists): corners as text.
+    let (a, b) = (&v["features"][0]["properties"], &v["features"][1]["properties"]);
+    assert_eq!((a["corners"].as_str(), a["start"].as_str(), a["end"].as_str()), (Some("0"), Some("corner"), Some("free")));
+    assert_eq!((b["start"].as_str(), b["end"].as_str()), (Some("closed"), Some("closed")));
+    assert!((b["normal_angle"].as_f64().unwrap() - 90.0).abs() < 1e-4, "{b}");
+    for f in v["features"].as_array().unwrap() {
+        assert!(f["properties"].as_object().unwrap().values().all(|p| !p.is_array() && !p.is_object()), "{f}");
+    }
 }
 
-/// A curve PLY written before curves had a confidence (crease 0.4) still reads, each curve at
-/// confidence 1.
+/// A curve PLY written before curves had a confidence (crease 0.4, whose first normal was
+/// n1x, n1y, n1z) still reads, each curve at confidence 1.
 #[test]
 fn ply_without_confidence_still_reads() {
     let d = tempfile::tempdir().unwrap();
@@ -163,7 +171,15 @@ fn ply_without_confidence_still_reads() {
     // Rewrite as the older layout: no confidence property, 4 bytes fewer a vertex.
     let bytes = std::fs::read(&p).unwrap();
     let end = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
-    let head = String::from_utf8(bytes[..end].to_vec()).unwrap().replace("property float confidence\n", "");
+    let head = String::from_utf8(bytes[..end].to_vec()).unwrap();
+    // The first normal is nx, ny, nz (Open3D, CloudCompare and trimesh read it as the normal);
+    // crease 0.5 and earlier named it n1x, n1y, n1z.
+    assert!(head.contains("property float nx\nproperty float ny\nproperty float nz\nproperty float n2x\n"), "{head}");
+    let head = head
+        .replace("property float confidence\n", "")
+        .replace("float nx\n", "float n1x\n")
+        .replace("float ny\n", "float n1y\n")
+        .replace("float nz\n", "float n1z\n");
     let mut old = head.into_bytes();
     let nv: usize = curves.iter().map(|c| c.vertices.len()).sum();
     for v in 0..nv {

@@ -33,10 +33,14 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
             if c.closed && !coords.is_empty() {
                 coords.push(coords[0]);
             }
-            let corners: Vec<usize> = c.vertices.iter().enumerate().filter(|(_, v)| v.corner).map(|(i, _)| i).collect();
+            let [start, end] = c.end_kinds();
+            // (Scalar properties only: Shapefile and FlatGeobuf drop or refuse lists.)
             json!({
                 "type": "Feature",
-                "properties": {"id": c.id, "closed": c.closed, "length": c.length(), "confidence": c.confidence, "corners": corners},
+                "properties": {
+                    "id": c.id, "closed": c.closed, "length": c.length(), "confidence": c.confidence,
+                    "normal_angle": c.mean_normal_angle(), "start": start, "end": end, "corners": c.corner_list(),
+                },
                 "geometry": {"type": "LineString", "coordinates": coords},
             })
         })

@@ -69,4 +69,34 @@ impl Polyline {
     pub fn length(&self) -> f64 {
         self.segments().map(|(a, b)| a.distance(b)).sum()
     }
+
+    /// Mean angle between the two surfaces' normals, in degrees folded to 0-90 (90: a
+    /// right-angled crease), over the vertices whose normals are known; None if none are. (The
+    /// normals are not oriented outwards, so a 60 degree and a 120 degree dihedral angle, or a
+    /// convex and a concave crease, read the same.)
+    pub fn mean_normal_angle(&self) -> Option<f64> {
+        let angles: Vec<f64> = self
+            .vertices
+            .iter()
+            .filter(|v| v.n[0] != Vec3::ZERO && v.n[1] != Vec3::ZERO)
+            .map(|v| (v.n[0].dot(v.n[1]).abs().min(1.0) as f64).acos().to_degrees())
+            .collect();
+        (!angles.is_empty()).then(|| angles.iter().sum::<f64>() / angles.len() as f64)
+    }
+
+    /// How the curve ends at its first and last vertex: "corner" (three or more surfaces
+    /// meet), "free" (it fades out or meets a border of the cloud), or "closed" for a loop.
+    pub fn end_kinds(&self) -> [&'static str; 2] {
+        if self.closed {
+            return ["closed"; 2];
+        }
+        let kind = |v: Option<&Vertex>| if v.is_some_and(|v| v.corner) { "corner" } else { "free" };
+        [kind(self.vertices.first()), kind(self.vertices.last())]
+    }
+
+    /// Indices of the corner vertices, as text ("0,17"): a list field that every GIS format
+    /// carries.
+    pub fn corner_list(&self) -> String {
+        self.vertices.iter().enumerate().filter(|(_, v)| v.corner).map(|(i, _)| i.to_string()).collect::<Vec<_>>().join(",")
+    }
 }

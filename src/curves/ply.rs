@@ -1,5 +1,6 @@
 //! Binary PLY polylines: a `vertex` element (x, y, z as double; the two surface normals as
-//! float; curve id; corner flag; the curve's confidence as float) and an `edge` element
+//! float, the first as nx, ny, nz and the second as n2x, n2y, n2z; curve id; corner flag; the
+//! curve's confidence as float) and an `edge` element
 //! (vertex1, vertex2). Each curve's vertices are stored in order; a closed curve has one more
 //! edge than an open one. (Files of crease 0.4 and earlier, without the confidence, are read
 //! too.)
@@ -11,7 +12,14 @@ use glam::{DVec3, Vec3};
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
+/// The vertex properties. The first surface's normal is named nx, ny, nz, so that common
+/// readers (Open3D, CloudCompare, trimesh) take it as the vertex normal.
 const HEADER: &str = "property double x\nproperty double y\nproperty double z\n\
+property float nx\nproperty float ny\nproperty float nz\n\
+property float n2x\nproperty float n2y\nproperty float n2z\n\
+property int curve\nproperty uchar corner\n";
+/// The same layout as written by crease 0.5 and earlier (n1x, n1y, n1z).
+const HEADER_0_5: &str = "property double x\nproperty double y\nproperty double z\n\
 property float n1x\nproperty float n1y\nproperty float n1z\n\
 property float n2x\nproperty float n2y\nproperty float n2z\n\
 property int curve\nproperty uchar corner\n";
@@ -67,8 +75,11 @@ pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
     let bad = |m: &str| Error::input(path, m.to_string());
     let end = bytes.windows(11).position(|w| w == b"end_header\n").ok_or_else(|| bad("not a crease curve PLY (no end_header)"))?;
     let head = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("PLY header is not text"))?;
-    if !head.contains("format binary_little_endian") || !head.contains(HEADER) {
+    let Some(properties) = [HEADER, HEADER_0_5].into_iter().find(|h| head.contains(h)) else {
         return Err(bad("not a crease curve PLY (unexpected properties)"));
+    };
+    if !head.contains("format binary_little_endian") {
+        return Err(bad("not a crease curve PLY (not binary little-endian)"));
     }
     let count = |name: &str| -> Result<usize> {
         head.lines()
@@ -77,7 +88,7 @@ pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
             .ok_or_else(|| bad("PLY header lacks an element count"))
     };
     let (nv, ne) = (count("vertex")?, count("edge")?);
-    let with_confidence = head.contains(&format!("{HEADER}{CONFIDENCE}"));
+    let with_confidence = head.contains(&format!("{properties}{CONFIDENCE}"));
     let vertex_bytes = if with_confidence { VERTEX_BYTES } else { VERTEX_BYTES - 4 };
     let body = &bytes[end + 11..];
     if body.len() < nv * vertex_bytes + ne * 8 {

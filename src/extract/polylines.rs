@@ -155,6 +155,30 @@ pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3,
     traced
 }
 
+/// Gives each vertex without normals (corners, and vertices with no edge point near) those of
+/// the nearest vertex along the curve that has them, the one before it on a tie. A curve with
+/// none keeps zeros.
+fn fill_from_neighbours(normals: &mut [[DVec3; 2]]) {
+    let known = |n: &[DVec3; 2]| n[0] != DVec3::ZERO;
+    let n = normals.len();
+    let (mut before, mut after) = (vec![None; n], vec![None; n]);
+    for i in 0..n {
+        before[i] = if known(&normals[i]) { Some(i) } else { i.checked_sub(1).and_then(|j| before[j]) };
+    }
+    for i in (0..n).rev() {
+        after[i] = if known(&normals[i]) { Some(i) } else { after.get(i + 1).copied().flatten() };
+    }
+    for i in 0..n {
+        let from = match (before[i], after[i]) {
+            (Some(b), Some(a)) => Some(if i - b <= a - i { b } else { a }),
+            (b, a) => b.or(a),
+        };
+        if let Some(j) = from {
+            normals[i] = normals[j];
+        }
+    }
+}
+
 /// `v` reordered by `perm` (consumed, so that the unordered copy is freed at once).
 fn permute<T: Copy>(v: Vec<T>, perm: &[u32]) -> Vec<T> {
     perm.iter().map(|&i| v[i as usize]).collect()
@@ -199,13 +223,7 @@ fn to_polylines(curves: &[complete::Curve], index: Option<&Index>, edge_normals:
                     prev = Some(mean);
                 }
             }
-            // Corners take the normals of their neighbour on the curve.
-            for i in 0..c.v.len() {
-                if c.corner[i] {
-                    let j = if i == 0 { 1.min(c.v.len() - 1) } else { i - 1 };
-                    normals[i] = normals[j];
-                }
-            }
+            fill_from_neighbours(&mut normals);
             let vertices: Vec<Vertex> =
                 c.v.iter()
                     .zip(&normals)
@@ -307,4 +325,22 @@ fn align(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
     let a = if a.dot(reference[0]) < 0.0 { -a } else { a };
     let b = if b.dot(reference[1]) < 0.0 { -b } else { b };
     [a, b]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vertices_without_normals_take_the_nearest_along_the_curve() {
+        let (a, b) = ([DVec3::X, DVec3::Y], [DVec3::Y, DVec3::Z]);
+        let z = [DVec3::ZERO; 2];
+        // Two corners at the ends (a curve between two corners), a gap in the middle.
+        let mut n = vec![z, a, z, z, z, b, z];
+        fill_from_neighbours(&mut n);
+        assert_eq!(n, vec![a, a, a, a, b, b, b]);
+        let mut none = vec![z, z];
+        fill_from_neighbours(&mut none);
+        assert_eq!(none, vec![z, z]);
+    }
 }
