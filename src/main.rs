@@ -1,6 +1,6 @@
 //! The `crease` command line: parses arguments and calls the library.
 
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Args, CommandFactory, Parser, Subcommand, ValueEnum};
 use crease::synth::{self, Sampling, SynthOptions};
 use crease::Error;
 use std::path::PathBuf;
@@ -196,6 +196,14 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Prints a shell completion script to stdout (e.g. `crease completions bash >
+    /// ~/.local/share/bash-completion/completions/crease`).
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Prints the man page (roff) to stdout (e.g. `crease man > crease.1; man ./crease.1`).
+    Man,
     /// Generates test clouds with ground-truth curves (OUT and OUT.truth.obj).
     Synth {
         #[command(subcommand)]
@@ -383,6 +391,8 @@ fn run(cli: Cli) -> Result<(), Error> {
             }
         }
         Cmd::Synth { what } => synth_cmd(what)?,
+        Cmd::Completions { shell } => clap_complete::generate(shell, &mut Cli::command(), "crease", &mut std::io::stdout()),
+        Cmd::Man => clap_mangen::Man::new(Cli::command()).render(&mut std::io::stdout()).map_err(|e| Error::output("stdout", e))?,
         Cmd::Extract {
             paths,
             out,
@@ -584,6 +594,14 @@ fn synth_cmd(what: SynthCmd) -> Result<(), Error> {
 }
 
 fn main() -> ExitCode {
+    // A reader that closes the pipe early (`crease info --json | head`) ends crease as it ends
+    // any Unix tool, quietly, rather than with a panic on the failed write. (A run stopped this
+    // way resumes like any other.)
+    #[cfg(unix)]
+    // SAFETY: restoring the default disposition of one signal, before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     crease::mem::map_large_blocks_apart();
     let cli = Cli::parse();
     match run(cli) {
