@@ -154,7 +154,7 @@ fn geojson_carries_crs_and_coordinates() {
     let (a, b) = (&v["features"][0]["properties"], &v["features"][1]["properties"]);
     assert_eq!((a["corners"].as_str(), a["start"].as_str(), a["end"].as_str()), (Some("0"), Some("corner"), Some("free")));
     assert_eq!((b["start"].as_str(), b["end"].as_str()), (Some("closed"), Some("closed")));
-    assert!((b["normal_angle"].as_f64().unwrap() - 90.0).abs() < 1e-4, "{b}");
+    assert!((b["angle"].as_f64().unwrap() - 90.0).abs() < 1e-4, "{b}");
     for f in v["features"].as_array().unwrap() {
         assert!(f["properties"].as_object().unwrap().values().all(|p| !p.is_array() && !p.is_object()), "{f}");
     }

@@ -69,7 +69,7 @@ fn write_obj_to(w: &mut impl Write, curves: &[Polyline], crs: &Crs) -> std::io::
         let [start, end] = c.end_kinds();
         let angle = c.mean_normal_angle().map_or("unknown".to_string(), |a| format!("{a:.1}"));
         let corners = c.corner_list();
-        writeln!(w, "# length {} normal_angle {angle} start {start} end {end} corners {}", c.length(), if corners.is_empty() { "none" } else { &corners })?;
+        writeln!(w, "# length {} angle {angle} start {start} end {end} corners {}", c.length(), if corners.is_empty() { "none" } else { &corners })?;
         write!(w, "l")?;
         for i in idx {
             write!(w, " {i}")?;
