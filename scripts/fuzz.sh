@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Fuzzes crease's readers (LAS, LAZ, PLY) and a resumed run's manifest with cargo-fuzz
+# Fuzzes crease's readers (LAS, LAZ, PLY, E57) and a resumed run's manifest with cargo-fuzz
 # (libFuzzer, AddressSanitizer), each target for SECONDS, one after the other.
 #
-#   scripts/fuzz.sh [SECONDS] [TARGET...]     (default: 300 s each; las laz ply manifest)
+#   scripts/fuzz.sh [SECONDS] [TARGET...]     (default: 300 s each; las laz ply e57 manifest)
 #
 # Needs a nightly toolchain (`rustup toolchain install nightly`) and `cargo install cargo-fuzz`.
 # Seeds are generated (small synthetic clouds in each format) plus the small files of
@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 SECONDS_EACH=${1:-300}
 shift || true
 TARGETS=("$@")
-[ ${#TARGETS[@]} -gt 0 ] || TARGETS=(las laz ply manifest)
+[ ${#TARGETS[@]} -gt 0 ] || TARGETS=(las laz ply e57 manifest)
 FUZZ=scripts/fuzz
 SHARED=../shared/data/real
 
@@ -22,7 +22,9 @@ cargo build --release --quiet
 seeds=$(mktemp -d)
 trap 'rm -rf "$seeds"' EXIT
 for fmt in las laz ply; do mkdir -p "$FUZZ/corpus/$fmt"; done
-mkdir -p "$FUZZ/corpus/manifest"
+mkdir -p "$FUZZ/corpus/manifest" "$FUZZ/corpus/e57"
+# The e57 target patches a valid file of its own; its seed is 'no patch'.
+printf '\377' > "$FUZZ/corpus/e57/seed-whole"
 # Small clouds: a few hundred points keep executions fast; libFuzzer grows inputs from them.
 ./target/release/crease synth shape cube -n 200 -o "$seeds/cube.las" 2>/dev/null
 ./target/release/crease synth shape fandisk -n 300 -o "$seeds/fandisk.ply" 2>/dev/null

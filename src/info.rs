@@ -37,7 +37,7 @@ pub fn file_info(path: &Path) -> Result<FileInfo> {
     let mut header = reader.header().clone();
     let mut sample = PointChunk::default();
     reader.read_chunk(SPACING_SAMPLE, &mut sample)?;
-    if header.format == FileFormat::Ply {
+    if !header.format.has_header_bounds() {
         header.bounds = crate::io::scan_bounds(path)?.0;
     }
     let spacing = estimate_spacing(&sample.xyz, header.count, &header.bounds);
@@ -76,6 +76,7 @@ pub fn render_text(infos: &[FileInfo]) -> String {
             FileFormat::Las => "LAS",
             FileFormat::Laz => "LAZ",
             FileFormat::Ply => "PLY",
+            FileFormat::E57 => "E57",
         };
         let _ = writeln!(s, "{}", h.path.display());
         let pf = h.point_format.map(|f| format!(", point format {f}")).unwrap_or_default();

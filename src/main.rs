@@ -86,7 +86,7 @@ impl ParamArgs {
 enum Cmd {
     /// Prints format, point count, bounds, CRS and a spacing estimate for each input file.
     Info {
-        /// Files or directories (all .las, .laz, .ply inside, sorted).
+        /// Files or directories (all .las, .laz, .ply, .e57 inside, sorted).
         #[arg(required = true)]
         paths: Vec<PathBuf>,
         /// Search directories' subdirectories too.

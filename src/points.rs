@@ -73,6 +73,16 @@ pub enum FileFormat {
     Laz,
     /// Stanford PLY (ascii or binary).
     Ply,
+    /// ASTM E57 (terrestrial scans, one or more per file).
+    E57,
+}
+
+impl FileFormat {
+    /// True if the format's header states the points' bounds (LAS, LAZ); the others' come
+    /// from reading the points.
+    pub fn has_header_bounds(self) -> bool {
+        matches!(self, FileFormat::Las | FileFormat::Laz)
+    }
 }
 
 /// What a file's header says, read without touching the points.

@@ -268,33 +268,6 @@ fn cloud_header(path: &Path, p: &Parsed) -> Result<CloudHeader> {
     })
 }
 
-/// Calls into the LAZ decoder currently running: while any is, panics print nothing (their
-/// message becomes the input error of [`guarded`]).
-static DECODING: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-
-/// Runs `f`, a call into the LAZ decoder, turning a panic inside it into an input error about
-/// `path`: a header that disagrees with its compressed data trips assertions and capacity
-/// overflows inside the `laz` crate, on its own decoding threads. The panic hook is chained,
-/// once, to stay silent while a decoder runs, so the user sees one line, not a backtrace.
-fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
-    use std::sync::atomic::Ordering;
-    static HOOK: std::sync::Once = std::sync::Once::new();
-    HOOK.call_once(|| {
-        let previous = std::panic::take_hook();
-        std::panic::set_hook(Box::new(move |info| {
-            if DECODING.load(Ordering::SeqCst) == 0 {
-                previous(info);
-            }
-        }));
-    });
-    DECODING.fetch_add(1, Ordering::SeqCst);
-    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
-    DECODING.fetch_sub(1, Ordering::SeqCst);
-    r.unwrap_or_else(|p| {
-        Err(Error::input(path, format!("corrupt compressed point data (the LAZ decoder failed: {})", crate::error::panic_message(&p).replace('\n', " "))))
-    })
-}
-
 /// Reads only the header of a LAS/LAZ file.
 pub fn read_header(path: &Path) -> Result<CloudHeader> {
     let map = map_file(path)?;
@@ -342,7 +315,8 @@ impl LasReader {
             // memory bounded, where a map would keep every page touched.
             drop(map);
             let file = File::open(path).map_err(|e| io_input(path, e))?;
-            let reader = guarded(path, || las::Reader::new(std::io::BufReader::with_capacity(1 << 20, file)).map_err(|e| las_error(path, e)))?;
+            let reader =
+                super::guarded(path, "the LAZ decoder", || las::Reader::new(std::io::BufReader::with_capacity(1 << 20, file)).map_err(|e| las_error(path, e)))?;
             let buf = las::PointDataBuilder::new().for_header(reader.header()).build();
             Points::Compressed { reader: Box::new(reader), buf }
         } else {
@@ -374,7 +348,7 @@ impl LasReader {
             }
             Points::Compressed { reader, buf } => {
                 let path = &self.path;
-                let got = guarded(path, || reader.fill_points(n as u64, buf).map_err(|e| las_error(path, e)))?;
+                let got = super::guarded(path, "the LAZ decoder", || reader.fill_points(n as u64, buf).map_err(|e| las_error(path, e)))?;
                 if got as usize != n {
                     return Err(Error::input(&self.path, format!("header declares {} points but the data ends after {}", self.header.count, self.next + got)));
                 }

@@ -4,6 +4,7 @@
 //! Readers hand out points in chunks of bounded size so that memory does not grow with the
 //! file; [`read_header`] answers count, bounds and CRS without touching the points.
 
+mod e57;
 mod las;
 mod ply;
 mod write;
@@ -54,6 +55,32 @@ impl Filter {
     }
 }
 
+/// Calls into a third-party decoder currently running: while any is, panics print nothing
+/// (their message becomes the input error of [`guarded`]).
+static DECODING: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// Runs `f`, a call into a third-party decoder (`what`), turning a panic inside it into an
+/// input error about `path`: a LAZ header that disagrees with its compressed data trips
+/// assertions and capacity overflows inside the `laz` crate, on its own decoding threads. The
+/// panic hook is chained, once, to stay silent while a decoder runs, so the user sees one
+/// line, not a backtrace.
+pub(crate) fn guarded<T>(path: &Path, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    use std::sync::atomic::Ordering;
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if DECODING.load(Ordering::SeqCst) == 0 {
+                previous(info);
+            }
+        }));
+    });
+    DECODING.fetch_add(1, Ordering::SeqCst);
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    DECODING.fetch_sub(1, Ordering::SeqCst);
+    r.unwrap_or_else(|p| Err(Error::input(path, format!("corrupt point data ({what} failed: {})", crate::error::panic_message(&p).replace('\n', " ")))))
+}
+
 /// Guesses the format of `path` from its extension.
 pub fn format_of(path: &Path) -> Option<FileFormat> {
     let ext = path.extension()?.to_str()?.to_ascii_lowercase();
@@ -61,6 +88,7 @@ pub fn format_of(path: &Path) -> Option<FileFormat> {
         "las" => Some(FileFormat::Las),
         "laz" => Some(FileFormat::Laz),
         "ply" => Some(FileFormat::Ply),
+        "e57" => Some(FileFormat::E57),
         _ => None,
     }
 }
@@ -89,7 +117,7 @@ impl Inputs {
                 let shown = names.iter().take(5).cloned().collect::<Vec<_>>().join(", ");
                 let more = if names.len() > 5 { format!(" and {} more", names.len() - 5) } else { String::new() };
                 let entries = if names.len() == 1 { "entry that is not a point file" } else { "entries that are not point files" };
-                out.push(format!("{}: passed over {} {entries} (.las, .laz, .ply): {shown}{more}", dir.display(), names.len()));
+                out.push(format!("{}: passed over {} {entries} (.las, .laz, .ply, .e57): {shown}{more}", dir.display(), names.len()));
             }
         }
         out
@@ -122,7 +150,7 @@ pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
             }
             if files.is_empty() {
                 let where_ = if recursive { "directory tree" } else { "directory" };
-                return Err(Error::input(p, format!("{where_} holds no point files (.las, .laz, .ply)")));
+                return Err(Error::input(p, format!("{where_} holds no point files (.las, .laz, .ply, .e57)")));
             }
             files.sort();
             out.files.extend(files);
@@ -132,7 +160,7 @@ pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
             }
         } else {
             if format_of(p).is_none() {
-                return Err(Error::input(p, "unknown file type (expected .las, .laz or .ply)"));
+                return Err(Error::input(p, "unknown file type (expected .las, .laz, .ply or .e57)"));
             }
             // (A FIFO or a device would block or never end.)
             if !meta.is_file() {
@@ -156,7 +184,8 @@ pub fn read_header(path: &Path) -> Result<CloudHeader> {
     match format_of(path) {
         Some(FileFormat::Las) | Some(FileFormat::Laz) => las::read_header(path),
         Some(FileFormat::Ply) => Ok(ply::PlyReader::open(path)?.header().clone()),
-        None => Err(Error::input(path, "unknown file type (expected .las, .laz or .ply)")),
+        Some(FileFormat::E57) => Ok(e57::E57Reader::open(path)?.header().clone()),
+        None => Err(Error::input(path, "unknown file type (expected .las, .laz, .ply or .e57)")),
     }
 }
 
@@ -178,6 +207,7 @@ pub fn scan_bounds(path: &Path) -> Result<(Bounds, u64)> {
 enum Inner {
     Las(las::LasReader),
     Ply(ply::PlyReader),
+    E57(Box<e57::E57Reader>),
 }
 
 /// A streaming reader over one point file.
@@ -206,7 +236,8 @@ impl PointReader {
         let inner = match format_of(path) {
             Some(FileFormat::Las) | Some(FileFormat::Laz) => Inner::Las(las::LasReader::open(path)?),
             Some(FileFormat::Ply) => Inner::Ply(ply::PlyReader::open(path)?),
-            None => return Err(Error::input(path, "unknown file type (expected .las, .laz or .ply)")),
+            Some(FileFormat::E57) => Inner::E57(Box::new(e57::E57Reader::open(path)?)),
+            None => return Err(Error::input(path, "unknown file type (expected .las, .laz, .ply or .e57)")),
         };
         Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise })
     }
@@ -216,6 +247,7 @@ impl PointReader {
         match &self.inner {
             Inner::Las(r) => r.header(),
             Inner::Ply(r) => r.header(),
+            Inner::E57(r) => r.header(),
         }
     }
 
@@ -227,6 +259,7 @@ impl PointReader {
         match &mut self.inner {
             Inner::Las(r) => r.read_chunk(max, out, &self.table, self.keep_withheld),
             Inner::Ply(r) => r.read_chunk(max, out, &self.table),
+            Inner::E57(r) => r.read_chunk(max, out, &self.table),
         }
     }
 

@@ -228,7 +228,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
             crs
         }
     };
-    for h in headers.iter().filter(|h| h.format != crate::points::FileFormat::Ply && !h.bounds.is_usable()) {
+    for h in headers.iter().filter(|h| h.format.has_header_bounds() && !h.bounds.is_usable()) {
         warnings.push(format!("{}: the header's bounds are not usable (not finite or inverted); bounds come from the points", h.path.display()));
     }
     let job = Job {

@@ -1,0 +1,80 @@
+//! E57 input: scans with their poses read as one cloud, giving the same curves as the same
+//! points in another format; corrupt files refused in one line.
+
+use e57::{E57Writer, Quaternion, Record, RecordValue, Transform, Translation};
+use glam::DVec3;
+use std::path::Path;
+use std::process::Command;
+
+fn crease(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(args).output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// A 30,000-point cube written as two scans: the first half as it is, the second in a scanner
+/// frame turned half a turn about z (its pose turns it back, exactly in floating point), with
+/// a point without a return after every tenth point.
+fn write_two_scans(path: &Path, cube: &[DVec3]) {
+    let mut w = E57Writer::from_file(path, "crease-test-file").unwrap();
+    let prototype = || vec![Record::CARTESIAN_X_F64, Record::CARTESIAN_Y_F64, Record::CARTESIAN_Z_F64, Record::CARTESIAN_INVALID_STATE];
+    let (first, second) = cube.split_at(cube.len() / 2);
+    let mut scan = w.add_pointcloud("scan-1", prototype()).unwrap();
+    for p in first {
+        scan.add_point(vec![RecordValue::Double(p.x), RecordValue::Double(p.y), RecordValue::Double(p.z), RecordValue::Integer(0)]).unwrap();
+    }
+    scan.finalize().unwrap();
+    let mut scan = w.add_pointcloud("scan-2", prototype()).unwrap();
+    scan.set_transform(Some(Transform { rotation: Quaternion { w: 0.0, x: 0.0, y: 0.0, z: 1.0 }, translation: Translation { x: 0.0, y: 0.0, z: 0.0 } }));
+    for (k, p) in second.iter().enumerate() {
+        scan.add_point(vec![RecordValue::Double(-p.x), RecordValue::Double(-p.y), RecordValue::Double(p.z), RecordValue::Integer(0)]).unwrap();
+        if k % 10 == 0 {
+            scan.add_point(vec![RecordValue::Double(0.0), RecordValue::Double(0.0), RecordValue::Double(0.0), RecordValue::Integer(2)]).unwrap();
+        }
+    }
+    scan.finalize().unwrap();
+    w.finalize().unwrap();
+}
+
+#[test]
+fn an_e57_gives_the_curves_of_the_same_points_in_ply() {
+    let d = tempfile::tempdir().unwrap();
+    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 30_000, ..Default::default() });
+    let e57 = d.path().join("cube.e57");
+    write_two_scans(&e57, &cube);
+    let ply = d.path().join("cube.ply");
+    let mut w = crease::io::PointWriter::create(&ply, &crease::io::WriteOptions { scale: 1e-6, offset: DVec3::ZERO, epsg: None }).unwrap();
+    w.write(&cube, &vec![0; cube.len()]).unwrap();
+    w.finish().unwrap();
+
+    let h = crease::io::read_header(&e57).unwrap();
+    assert_eq!(h.count, 30_000 + 1_500, "records, with the points without a return");
+    let read = crease::io::read_all(&[e57.clone()], &crease::io::Filter::default()).unwrap();
+    assert_eq!(read.xyz, cube, "poses applied exactly, points without a return left out");
+
+    let runs = [("e57", &e57), ("ply", &ply)].map(|(name, input)| {
+        let run = d.path().join(name);
+        let (code, err) = crease(&["extract", input.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]);
+        assert_eq!(code, 0, "{err}");
+        run
+    });
+    for f in ["curves.obj", "curves.ply", "curves.geojson"] {
+        assert_eq!(std::fs::read(runs[0].join(f)).unwrap(), std::fs::read(runs[1].join(f)).unwrap(), "{f}");
+    }
+    assert_eq!(crease::curves::read_obj(&runs[0].join("curves.obj")).unwrap().len(), 12);
+
+    // Truncated and corrupted: one line naming the file, exit 2, no panic.
+    let bytes = std::fs::read(&e57).unwrap();
+    let mut flipped = bytes.clone();
+    for k in (2000..flipped.len()).step_by(997) {
+        flipped[k] ^= 0x5a;
+    }
+    for (name, b) in [("truncated.e57", bytes[..bytes.len() / 2].to_vec()), ("flipped.e57", flipped), ("header.e57", bytes[..40].to_vec())] {
+        let p = d.path().join(name);
+        std::fs::write(&p, b).unwrap();
+        for cmd in ["info", "scan"] {
+            let (code, err) = crease(&[cmd, p.to_str().unwrap()]);
+            assert_eq!(code, 2, "{name} {cmd}: {err}");
+            assert!(!err.contains("panicked") && err.trim_end().lines().count() == 1 && err.contains(name), "{name} {cmd}: {err}");
+        }
+    }
+}
