@@ -48,7 +48,7 @@ fn an_e57_gives_the_curves_of_the_same_points_in_ply() {
 
     let h = crease::io::read_header(&e57).unwrap();
     assert_eq!(h.count, 30_000 + 1_500, "records, with the points without a return");
-    let read = crease::io::read_all(&[e57.clone()], &crease::io::Filter::default()).unwrap();
+    let read = crease::io::read_all(std::slice::from_ref(&e57), &crease::io::Filter::default()).unwrap();
     assert_eq!(read.xyz, cube, "poses applied exactly, points without a return left out");
 
     let runs = [("e57", &e57), ("ply", &ply)].map(|(name, input)| {
