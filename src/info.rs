@@ -38,7 +38,12 @@ pub fn file_info(path: &Path) -> Result<FileInfo> {
     let mut sample = PointChunk::default();
     reader.read_chunk(SPACING_SAMPLE, &mut sample)?;
     if !header.format.has_header_bounds() {
-        header.bounds = crate::io::scan_bounds(path)?.0;
+        let (bounds, n) = crate::io::scan_bounds(path, &Filter::keep_all())?;
+        header.bounds = bounds;
+        // (Text clouds declare no count.)
+        if header.count == 0 {
+            header.count = n;
+        }
     }
     let spacing = estimate_spacing(&sample.xyz, header.count, &header.bounds);
     Ok(FileInfo { header, spacing, spacing_sample: sample.len() })
@@ -77,6 +82,7 @@ pub fn render_text(infos: &[FileInfo]) -> String {
             FileFormat::Laz => "LAZ",
             FileFormat::Ply => "PLY",
             FileFormat::E57 => "E57",
+            FileFormat::Text => "text",
         };
         let _ = writeln!(s, "{}", h.path.display());
         let pf = h.point_format.map(|f| format!(", point format {f}")).unwrap_or_default();

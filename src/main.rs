@@ -22,11 +22,23 @@ struct FilterArgs {
     /// Keep withheld points and noise classes 7 and 18 (dropped by default).
     #[arg(long)]
     keep_noise: bool,
+    /// Text clouds (.xyz, .pts, .csv, .txt): the columns of x, y, z and optionally the class,
+    /// numbered from 0 (default: from a header line naming them, else the first three).
+    #[arg(long, value_name = "X,Y,Z[,CLASS]")]
+    columns: Option<String>,
+    /// Text clouds: lines to skip before the first point (with --columns).
+    #[arg(long, default_value_t = 0, requires = "columns")]
+    skip_lines: usize,
 }
 
 impl FilterArgs {
-    fn filter(&self) -> crease::io::Filter {
-        crease::io::Filter { classes: self.classes.clone(), keep_noise: self.keep_noise }
+    fn filter(&self) -> Result<crease::io::Filter, Error> {
+        let text = self
+            .columns
+            .as_deref()
+            .map(|c| crease::io::TextColumns::parse(c, self.skip_lines).map_err(|e| Error::Usage(format!("--columns {e}"))))
+            .transpose()?;
+        Ok(crease::io::Filter { classes: self.classes.clone(), keep_noise: self.keep_noise, text })
     }
 }
 
@@ -363,7 +375,7 @@ fn run(cli: Cli) -> Result<(), Error> {
             let mut report = vec![];
             let mut total = 0u64;
             for f in &files {
-                let s = crease::io::scan(f, &filter.filter())?;
+                let s = crease::io::scan(f, &filter.filter()?)?;
                 total += s.records;
                 report.push(s);
             }
@@ -534,7 +546,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
     };
     let mut summaries = vec![];
     for (inputs, dir) in jobs {
-        let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter(), &opts)?;
+        let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter()?, &opts)?;
         if json {
             let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).collect();
             summaries.push(serde_json::json!({"dir": dir, "outputs": outputs, "report": r}));

@@ -75,6 +75,8 @@ pub enum FileFormat {
     Ply,
     /// ASTM E57 (terrestrial scans, one or more per file).
     E57,
+    /// A text cloud (XYZ, PTS, CSV, TXT).
+    Text,
 }
 
 impl FileFormat {

@@ -19,7 +19,7 @@ fn header_counts_and_bounds_match_a_full_read() {
     assert_eq!(files.len(), 10, "expected the ten shared test files");
     for f in &files {
         let h = read_header(f).unwrap();
-        let (b, n) = scan_bounds(f).unwrap();
+        let (b, n) = scan_bounds(f, &crease::io::Filter::keep_all()).unwrap();
         assert_eq!(n, h.count, "{}: point count", f.display());
         for i in 0..3 {
             // Header bounds are stored as doubles, points as scaled integers: allow one unit of

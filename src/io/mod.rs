@@ -7,8 +7,10 @@
 mod e57;
 mod las;
 mod ply;
+mod text;
 mod write;
 
+pub use text::TextColumns;
 pub use write::{PointWriter, WriteOptions};
 
 use crate::error::{io_input, Error, Result};
@@ -30,12 +32,14 @@ pub struct Filter {
     pub classes: Option<Vec<u8>>,
     /// Keep withheld points and noise classes 7 and 18 (dropped by default).
     pub keep_noise: bool,
+    /// Where a text cloud's columns are (detected if `None`).
+    pub text: Option<TextColumns>,
 }
 
 impl Filter {
     /// A filter that keeps every point.
     pub fn keep_all() -> Self {
-        Filter { classes: None, keep_noise: true }
+        Filter { classes: None, keep_noise: true, text: None }
     }
 
     /// A 256-entry table: `table[class]` is true if points of that class are kept.
@@ -89,6 +93,7 @@ pub fn format_of(path: &Path) -> Option<FileFormat> {
         "laz" => Some(FileFormat::Laz),
         "ply" => Some(FileFormat::Ply),
         "e57" => Some(FileFormat::E57),
+        "xyz" | "pts" | "csv" | "txt" => Some(FileFormat::Text),
         _ => None,
     }
 }
@@ -117,7 +122,7 @@ impl Inputs {
                 let shown = names.iter().take(5).cloned().collect::<Vec<_>>().join(", ");
                 let more = if names.len() > 5 { format!(" and {} more", names.len() - 5) } else { String::new() };
                 let entries = if names.len() == 1 { "entry that is not a point file" } else { "entries that are not point files" };
-                out.push(format!("{}: passed over {} {entries} (.las, .laz, .ply, .e57): {shown}{more}", dir.display(), names.len()));
+                out.push(format!("{}: passed over {} {entries} (.las, .laz, .ply, .e57, .xyz, .pts, .csv, .txt): {shown}{more}", dir.display(), names.len()));
             }
         }
         out
@@ -150,7 +155,7 @@ pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
             }
             if files.is_empty() {
                 let where_ = if recursive { "directory tree" } else { "directory" };
-                return Err(Error::input(p, format!("{where_} holds no point files (.las, .laz, .ply, .e57)")));
+                return Err(Error::input(p, format!("{where_} holds no point files (.las, .laz, .ply, .e57, .xyz, .pts, .csv, .txt)")));
             }
             files.sort();
             out.files.extend(files);
@@ -160,7 +165,7 @@ pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
             }
         } else {
             if format_of(p).is_none() {
-                return Err(Error::input(p, "unknown file type (expected .las, .laz, .ply or .e57)"));
+                return Err(Error::input(p, "unknown file type (expected .las, .laz, .ply, .e57, .xyz, .pts, .csv or .txt)"));
             }
             // (A FIFO or a device would block or never end.)
             if !meta.is_file() {
@@ -185,13 +190,15 @@ pub fn read_header(path: &Path) -> Result<CloudHeader> {
         Some(FileFormat::Las) | Some(FileFormat::Laz) => las::read_header(path),
         Some(FileFormat::Ply) => Ok(ply::PlyReader::open(path)?.header().clone()),
         Some(FileFormat::E57) => Ok(e57::E57Reader::open(path)?.header().clone()),
-        None => Err(Error::input(path, "unknown file type (expected .las, .laz, .ply or .e57)")),
+        Some(FileFormat::Text) => Ok(text::TextReader::open(path, None)?.header().clone()),
+        None => Err(Error::input(path, "unknown file type (expected .las, .laz, .ply, .e57, .xyz, .pts, .csv or .txt)")),
     }
 }
 
-/// Reads every point of `path` (without filtering) to find its true bounds and count.
-pub fn scan_bounds(path: &Path) -> Result<(Bounds, u64)> {
-    let mut reader = PointReader::open(path, &Filter::keep_all())?;
+/// Reads every point of `path` (without class filtering; text columns as `filter` says) to
+/// find its true bounds and count.
+pub fn scan_bounds(path: &Path, filter: &Filter) -> Result<(Bounds, u64)> {
+    let mut reader = PointReader::open(path, &Filter { text: filter.text, ..Filter::keep_all() })?;
     let mut chunk = PointChunk::default();
     let mut b = Bounds::EMPTY;
     let mut n = 0u64;
@@ -208,6 +215,7 @@ enum Inner {
     Las(las::LasReader),
     Ply(ply::PlyReader),
     E57(Box<e57::E57Reader>),
+    Text(text::TextReader),
 }
 
 /// A streaming reader over one point file.
@@ -237,7 +245,8 @@ impl PointReader {
             Some(FileFormat::Las) | Some(FileFormat::Laz) => Inner::Las(las::LasReader::open(path)?),
             Some(FileFormat::Ply) => Inner::Ply(ply::PlyReader::open(path)?),
             Some(FileFormat::E57) => Inner::E57(Box::new(e57::E57Reader::open(path)?)),
-            None => return Err(Error::input(path, "unknown file type (expected .las, .laz, .ply or .e57)")),
+            Some(FileFormat::Text) => Inner::Text(text::TextReader::open(path, filter.text)?),
+            None => return Err(Error::input(path, "unknown file type (expected .las, .laz, .ply, .e57, .xyz, .pts, .csv or .txt)")),
         };
         Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise })
     }
@@ -248,6 +257,7 @@ impl PointReader {
             Inner::Las(r) => r.header(),
             Inner::Ply(r) => r.header(),
             Inner::E57(r) => r.header(),
+            Inner::Text(r) => r.header(),
         }
     }
 
@@ -260,6 +270,7 @@ impl PointReader {
             Inner::Las(r) => r.read_chunk(max, out, &self.table, self.keep_withheld),
             Inner::Ply(r) => r.read_chunk(max, out, &self.table),
             Inner::E57(r) => r.read_chunk(max, out, &self.table),
+            Inner::Text(r) => r.read_chunk(max, out, &self.table),
         }
     }
 

@@ -26,6 +26,8 @@ pub struct Job {
     pub classes: Option<Vec<u8>>,
     /// Keep withheld and noise points.
     pub keep_noise: bool,
+    /// Text clouds' columns, if given.
+    pub text: Option<crate::io::TextColumns>,
     /// Tile edge length, if given.
     pub tile_size: Option<f64>,
     /// Memory budget in bytes.
@@ -151,7 +153,7 @@ pub fn job_difference(old: &Job, new: &Job) -> String {
     if old.params != new.params {
         return "the method parameters changed".to_string();
     }
-    if old.classes != new.classes || old.keep_noise != new.keep_noise {
+    if old.classes != new.classes || old.keep_noise != new.keep_noise || old.text != new.text {
         return "the point filters changed".to_string();
     }
     if old.tile_size != new.tile_size || old.memory != new.memory {

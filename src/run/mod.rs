@@ -237,6 +237,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         params: params.without_defaults(),
         classes: filter.classes.clone(),
         keep_noise: filter.keep_noise,
+        text: filter.text,
         tile_size: opts.tile_size,
         memory: opts.memory,
     };
@@ -246,9 +247,17 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         let mut b = Bounds::EMPTY;
         let mut declared = 0;
         for h in &headers {
-            // (Header bounds that are missing (PLY), not finite or inverted come from the points.)
-            b.union(&if h.bounds.is_usable() { h.bounds } else { io::scan_bounds(&h.path)?.0 });
-            declared += h.count;
+            // (Header bounds that are missing (PLY, E57, text), not finite or inverted come
+            // from the points.)
+            if h.bounds.is_usable() {
+                b.union(&h.bounds);
+                declared += h.count;
+            } else {
+                let (scanned, n) = io::scan_bounds(&h.path, filter)?;
+                b.union(&scanned);
+                // (Text clouds declare no count: the scan's stands in.)
+                declared += if h.count > 0 { h.count } else { n };
+            }
         }
         if b.is_empty() {
             return Err(Error::input(&first, "no points"));
@@ -346,6 +355,7 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
         params: params.clone(),
         classes: None,
         keep_noise: true,
+        text: None,
         tile_size: opts.tile_size,
         memory: opts.memory,
     };

@@ -1,0 +1,172 @@
+//! Text clouds: XYZ, PTS, CSV and TXT, one point a line, values separated by spaces, tabs,
+//! commas or semicolons.
+//!
+//! Without a column spec the layout is detected: a first line with names (`x`, `y`, `z`,
+//! optionally `classification` or `class`; quotes and a leading `//` allowed) says where the
+//! columns are; otherwise x, y and z are the first three values. A line holding a single
+//! integer is a PTS block's point count and is skipped. A data line that lacks a column, or
+//! whose value is not a number, is an error naming the line.
+
+use crate::error::{io_input, Error, Result};
+use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk, Precision};
+use glam::DVec3;
+use memmap2::Mmap;
+use serde::{Deserialize, Serialize};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+/// Where a text cloud's values are (0-based columns), and how many lines to skip first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TextColumns {
+    /// Columns of x, y and z.
+    pub xyz: [usize; 3],
+    /// Column of the ASPRS class, if any.
+    pub class: Option<usize>,
+    /// Lines skipped before the first point (a header).
+    pub skip: usize,
+}
+
+impl TextColumns {
+    /// Parses `X,Y,Z[,CLASS]` (0-based column numbers).
+    ///
+    /// ```
+    /// use crease::io::TextColumns;
+    /// let c = TextColumns::parse("1,2,3,6", 1).unwrap();
+    /// assert_eq!((c.xyz, c.class, c.skip), ([1, 2, 3], Some(6), 1));
+    /// assert!(TextColumns::parse("x,y", 0).is_err());
+    /// ```
+    pub fn parse(spec: &str, skip: usize) -> std::result::Result<TextColumns, String> {
+        let cols: Vec<usize> = spec
+            .split(',')
+            .map(|c| c.trim().parse::<usize>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| format!("'{spec}': expected X,Y,Z[,CLASS] column numbers from 0"))?;
+        match cols[..] {
+            [x, y, z] => Ok(TextColumns { xyz: [x, y, z], class: None, skip }),
+            [x, y, z, c] => Ok(TextColumns { xyz: [x, y, z], class: Some(c), skip }),
+            _ => Err(format!("'{spec}': expected 3 or 4 column numbers (X,Y,Z[,CLASS])")),
+        }
+    }
+}
+
+fn tokens(line: &str) -> impl Iterator<Item = &str> {
+    line.split([' ', '\t', ',', ';']).filter(|t| !t.is_empty())
+}
+
+/// The columns a header line names, if it is one (some value is not a number).
+fn from_names(line: &str) -> Option<TextColumns> {
+    let names: Vec<String> = tokens(line).map(|t| t.trim_matches(['"', '\'']).trim_start_matches("//").to_ascii_lowercase()).collect();
+    if names.iter().all(|n| n.parse::<f64>().is_ok()) {
+        return None;
+    }
+    let at = |want: &[&str]| names.iter().position(|n| want.contains(&n.as_str()));
+    Some(TextColumns { xyz: [at(&["x"]).unwrap_or(0), at(&["y"]).unwrap_or(1), at(&["z"]).unwrap_or(2)], class: at(&["classification", "class"]), skip: 1 })
+}
+
+/// A chunked reader over one text cloud.
+pub struct TextReader {
+    path: PathBuf,
+    header: CloudHeader,
+    map: Option<Mmap>,
+    cols: TextColumns,
+    /// Byte offset of the next line, its 1-based number, and records read.
+    pos: usize,
+    line: u64,
+    next: u64,
+}
+
+impl TextReader {
+    /// Maps the file and finds its layout (`spec`, or detected from its first line).
+    pub fn open(path: &Path, spec: Option<TextColumns>) -> Result<TextReader> {
+        let file = File::open(path).map_err(|e| io_input(path, e))?;
+        let len = file.metadata().map_err(|e| io_input(path, e))?.len();
+        if len == 0 {
+            return Err(Error::input(path, "empty file"));
+        }
+        // SAFETY: read-only map of an input crease never writes.
+        let map = unsafe { Mmap::map(&file) }.map_err(|e| io_input(path, e))?;
+        #[cfg(unix)]
+        let _ = map.advise(memmap2::Advice::Sequential);
+        let cols = match spec {
+            Some(c) => c,
+            None => {
+                let first = map.split(|&b| b == b'\n').next().unwrap_or(&[]);
+                let first = std::str::from_utf8(first).map_err(|_| Error::input(path, "line 1 is not text: not a text point cloud"))?;
+                from_names(first).unwrap_or(TextColumns { xyz: [0, 1, 2], class: None, skip: 0 })
+            }
+        };
+        let header = CloudHeader {
+            path: path.to_path_buf(),
+            format: FileFormat::Text,
+            version: format!("columns x {} y {} z {}{}", cols.xyz[0], cols.xyz[1], cols.xyz[2], cols.class.map(|c| format!(" class {c}")).unwrap_or_default()),
+            point_format: None,
+            // (Unknown until read: the bounds scan counts them.)
+            count: 0,
+            bounds: Bounds::EMPTY,
+            crs: Crs::default(),
+            precision: Precision::Float(52),
+        };
+        Ok(TextReader { path: path.to_path_buf(), header, map: Some(map), cols, pos: 0, line: 0, next: 0 })
+    }
+
+    /// The file's header (count and bounds unknown until the points are read).
+    pub fn header(&self) -> &CloudHeader {
+        &self.header
+    }
+
+    /// Reads up to `max` points into `out` (filtered); returns the number of records read.
+    pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
+        let Some(map) = &self.map else { return Ok(0) };
+        let bytes: &[u8] = map;
+        let need = self.cols.xyz.iter().copied().chain(self.cols.class).max().unwrap_or(2) + 1;
+        let mut read = 0;
+        while read < max && self.pos < bytes.len() {
+            let end = bytes[self.pos..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |k| self.pos + k);
+            let raw = &bytes[self.pos..end];
+            self.pos = end + 1;
+            self.line += 1;
+            if self.line <= self.cols.skip as u64 {
+                continue;
+            }
+            let text = std::str::from_utf8(raw).map_err(|_| Error::input(&self.path, format!("line {} is not text", self.line)))?.trim();
+            // x, y, z and the class, by slot.
+            let mut got = [0.0f64; 4];
+            let mut n = 0;
+            for (k, t) in tokens(text).enumerate() {
+                if k >= need {
+                    break;
+                }
+                let slots = [self.cols.xyz[0] == k, self.cols.xyz[1] == k, self.cols.xyz[2] == k, self.cols.class == Some(k)];
+                if slots.contains(&true) {
+                    let v = t.parse::<f64>().map_err(|_| Error::input(&self.path, format!("line {}: '{t}' in column {k} is not a number", self.line)))?;
+                    for (g, hit) in got.iter_mut().zip(slots) {
+                        if hit {
+                            *g = v;
+                        }
+                    }
+                }
+                n = k + 1;
+            }
+            // (Blank lines, and a PTS block's point count: one integer alone.)
+            if n == 0 || (n == 1 && text.parse::<u64>().is_ok()) {
+                continue;
+            }
+            if n < need {
+                return Err(Error::input(&self.path, format!("line {} has {n} values; the columns read need {need}", self.line)));
+            }
+            let p = DVec3::new(got[0], got[1], got[2]);
+            if !p.is_finite() {
+                return Err(Error::input(&self.path, format!("line {}: coordinates are not finite", self.line)));
+            }
+            let class = if self.cols.class.is_some() { got[3].clamp(0.0, 255.0) as u8 } else { 0 };
+            if table[class as usize] {
+                out.xyz.push(p);
+                out.class.push(class);
+                out.index.push(self.next);
+            }
+            self.next += 1;
+            read += 1;
+        }
+        Ok(read)
+    }
+}
