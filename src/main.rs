@@ -95,10 +95,12 @@ impl ParamArgs {
 }
 
 #[derive(Subcommand)]
+// (Parsed once per process: the size of its largest variant costs nothing.)
+#[allow(clippy::large_enum_variant)]
 enum Cmd {
     /// Prints format, point count, bounds, CRS and a spacing estimate for each input file.
     Info {
-        /// Files or directories (all .las, .laz, .ply, .e57 inside, sorted).
+        /// Files or directories (all point files inside, sorted).
         #[arg(required = true)]
         paths: Vec<PathBuf>,
         /// Search directories' subdirectories too.
