@@ -13,6 +13,8 @@ status=0
 for run in "$@"; do
   curves=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['counts']['curves'])" "$run/report.json")
   epsg=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['crs']['epsg'] or '')" "$run/report.json")
+  # Without a code, the CRS's name (the WKT's first quoted string) is what GDAL must show.
+  name=$(python3 -c "import json,sys; w=json.load(open(sys.argv[1]))['crs']['wkt']; print(w.split('\"')[1] if w else '')" "$run/report.json")
   tmp=$(mktemp -d)
   for fmt in "GeoJSON:geojson" "ESRI Shapefile:shp" "FlatGeobuf:fgb" "GPKG:gpkg"; do
     driver=${fmt%%:*}; ext=${fmt##*:}
@@ -26,14 +28,23 @@ for run in "$@"; do
     # The layer's CRS as GDAL reads it: its root EPSG code (the last ID or AUTHORITY).
     seen=$(grep -oE '(ID\["EPSG",|AUTHORITY\["EPSG",")[0-9]+' <<<"$info" | tail -1 | grep -oE '[0-9]+$' || true)
     fields=$(grep -cE '^(id|closed|length|confidence|angle|start|end|corners): ' <<<"$info" || true)
+    gdal_name=$(sed -n '/Layer SRS WKT/{n;p;q}' <<<"$info" | cut -d'"' -f2)
     verdict=ok
     [ "$count" = "$curves" ] || verdict=FAIL
-    if [ -n "$epsg" ]; then [ "$seen" = "$epsg" ] || verdict=FAIL; fi
-    # (Shapefile keeps the id as its FID, not as a field.)
-    want=8; [ "$ext" = shp ] && want=7; [ "$ext" = gpkg ] && want=7
+    if [ -n "$epsg" ]; then
+      [ "$seen" = "$epsg" ] || verdict=FAIL
+      crs="EPSG:${seen:-none} (run: EPSG:$epsg)"
+    elif [ -n "$name" ]; then
+      [ "$gdal_name" = "$name" ] || verdict=FAIL
+      crs="\"$gdal_name\" (run: \"$name\", no code)"
+    else
+      crs="\"$gdal_name\" (run: none; GDAL's default)"
+    fi
+    # (A run without curves has no fields to show; GeoPackage keeps the id as its FID.)
+    want=8; [ "$ext" = gpkg ] && want=7; [ "$curves" = 0 ] && want=0
     [ "$fields" -ge "$want" ] || verdict=FAIL
     [ "$verdict" = ok ] || status=1
-    printf '%-6s %-40s %-8s features %s/%s  CRS EPSG:%s (run: %s)  fields %s\n' "$verdict" "$run" "$ext" "$count" "$curves" "${seen:-none}" "${epsg:-no code, WKT only}" "$fields"
+    printf '%-4s %-36s %-7s features %s/%s  fields %s  CRS %s\n' "$verdict" "$(basename "$run")" "$ext" "$count" "$curves" "$fields" "$crs"
   done
   rm -rf "$tmp"
 done

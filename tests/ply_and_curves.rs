@@ -158,6 +158,11 @@ fn geojson_carries_crs_and_coordinates() {
     for f in v["features"].as_array().unwrap() {
         assert!(f["properties"].as_object().unwrap().values().all(|p| !p.is_array() && !p.is_object()), "{f}");
     }
+    // Without an EPSG code, the `crs` member's name is the WKT, which GDAL reads as the CRS.
+    let wkt_only = crease::points::Crs { wkt: Some("PROJCS[\"NAD83_2011_Nebraska_ft\"]".into()), ..Default::default() };
+    write_geojson(&p, &sample_curves(), &wkt_only).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    assert_eq!(v["crs"]["properties"]["name"], "PROJCS[\"NAD83_2011_Nebraska_ft\"]");
 }
 
 /// A curve PLY written before curves had a confidence (crease 0.4, whose first normal was

@@ -2,7 +2,8 @@
 //! (usually projected) CRS. RFC 7946 assumes WGS 84; crease does not reproject, so it names the
 //! CRS with the 2008 GeoJSON `crs` member (EPSG code, understood by GDAL/QGIS) and also keeps
 //! the full WKT in a `crs_wkt` member when the input carries one, and the units in `crs_units`
-//! (GDAL reads the `crs` member only; a CRS without an EPSG code reaches it through no member).
+//! (GDAL reads the `crs` member only: its name is the EPSG URN, or the WKT when there is no
+//! code).
 
 use super::Polyline;
 use crate::error::{Error, Result};
@@ -17,8 +18,15 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
     let mut w = BufWriter::new(f);
     let mut head = serde_json::Map::new();
     head.insert("type".into(), json!("FeatureCollection"));
-    if let Some(code) = crs.epsg {
-        head.insert("crs".into(), json!({"type": "name", "properties": {"name": format!("urn:ogc:def:crs:EPSG::{code}")}}));
+    // GDAL reads the `crs` member's name as any CRS it accepts from a user: an EPSG URN, or a
+    // WKT when the CRS has no code.
+    let name = match (crs.epsg, &crs.wkt) {
+        (Some(code), _) => Some(format!("urn:ogc:def:crs:EPSG::{code}")),
+        (None, Some(wkt)) => Some(wkt.clone()),
+        (None, None) => None,
+    };
+    if let Some(name) = name {
+        head.insert("crs".into(), json!({"type": "name", "properties": {"name": name}}));
     }
     if let Some(wkt) = &crs.wkt {
         head.insert("crs_wkt".into(), json!(wkt));
