@@ -48,6 +48,7 @@ pub mod spacing;
 pub mod spatial;
 pub mod synth;
 pub mod tiles;
+pub mod view;
 pub(crate) mod workspace;
 
 pub use error::{Error, Result};

@@ -210,6 +210,12 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Writes RUN/view.html: the curves over a sample of the points, to turn and zoom in a
+    /// browser (self-contained: WebGL, no network access).
+    View {
+        /// A finished run directory.
+        dir: PathBuf,
+    },
     /// Prints a shell completion script to stdout (e.g. `crease completions bash >
     /// ~/.local/share/bash-completion/completions/crease`).
     Completions {
@@ -406,6 +412,10 @@ fn run(cli: Cli) -> Result<(), Error> {
         }
         Cmd::Synth { what } => synth_cmd(what)?,
         Cmd::Completions { shell } => clap_complete::generate(shell, &mut Cli::command(), "crease", &mut std::io::stdout()),
+        Cmd::View { dir } => {
+            let page = crease::run::write_view(&dir)?;
+            eprintln!("wrote {}", page.display());
+        }
         Cmd::Man => clap_mangen::Man::new(Cli::command()).render(&mut std::io::stdout()).map_err(|e| Error::output("stdout", e))?,
         Cmd::Extract {
             paths,

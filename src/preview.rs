@@ -144,7 +144,7 @@ fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves
 }
 
 /// A saturated colour for curve `id`: hues a golden angle apart, so neighbours differ.
-fn curve_colour(id: u32) -> [u8; 3] {
+pub(crate) fn curve_colour(id: u32) -> [u8; 3] {
     let h = (id as f64 * 0.618_033_988_75).fract() * 6.0;
     let x = 1.0 - (h % 2.0 - 1.0).abs();
     let (r, g, b) = match h as u32 {

@@ -154,7 +154,7 @@ fn non_finite_coordinates() {
 #[test]
 fn directory_without_point_files() {
     let d = tmp();
-    std::fs::write(d.path().join("readme.txt"), "no points here").unwrap();
+    std::fs::write(d.path().join("readme.md"), "no points here").unwrap();
     let (code, _, err) = crease(&["info", d.path().to_str().unwrap()]);
     assert_eq!(code, 2);
     assert!(err.contains("directory holds no point files"), "{err}");
@@ -164,7 +164,7 @@ fn directory_without_point_files() {
 #[test]
 fn unknown_extension() {
     let d = tmp();
-    let p = d.path().join("cloud.xyz");
+    let p = d.path().join("cloud.bin");
     std::fs::write(&p, "1 2 3\n").unwrap();
     expect_error(&p, "unknown file type");
 }
@@ -372,7 +372,7 @@ fn warnings_name_what_was_passed_over_or_assumed() {
     let d = tmp();
     let scans = d.path().join("scans");
     std::fs::create_dir_all(scans.join("sub")).unwrap();
-    std::fs::write(scans.join("notes.txt"), "survey notes").unwrap();
+    std::fs::write(scans.join("notes.md"), "survey notes").unwrap();
     let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
     let write = |path: &Path, pts: &[glam::DVec3], epsg: Option<u16>| {
         let mut w = PointWriter::create(path, &WriteOptions { scale: 1e-4, offset: glam::DVec3::ZERO, epsg }).unwrap();
@@ -387,7 +387,11 @@ fn warnings_name_what_was_passed_over_or_assumed() {
     assert_eq!(code, 0, "{err}");
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("report.json")).unwrap()).unwrap();
     let listed: Vec<&str> = report["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
-    for needle in ["passed over 2 entries that are not point files (.las, .laz, .ply): notes.txt, sub/", "b.las: has no CRS; taken to be in", "(EPSG:32610)"] {
+    for needle in [
+        "passed over 2 entries that are not point files (.las, .laz, .ply, .e57, .xyz, .pts, .csv, .txt): notes.md, sub/",
+        "b.las: has no CRS; taken to be in",
+        "(EPSG:32610)",
+    ] {
         assert!(err.contains(needle), "stderr should say '{needle}': {err}");
         assert!(listed.iter().any(|w| w.contains(needle)), "report should list '{needle}': {listed:?}");
     }

@@ -24,3 +24,27 @@ fn completions_and_man_page_cover_the_commands() {
         assert!(man.contains(word), "man page lacks {word}");
     }
 }
+
+/// `crease view RUN` writes a page that needs nothing but itself (no network, no other file)
+/// and holds the run's curves; a directory that is not a finished run is refused.
+#[test]
+fn view_writes_a_self_contained_page() {
+    let d = tempfile::tempdir().unwrap();
+    let run = d.path().join("run");
+    let cube = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las");
+    stdout(&["extract", cube.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]);
+    stdout(&["view", run.to_str().unwrap()]);
+    let page = std::fs::read_to_string(run.join("view.html")).unwrap();
+    assert!(page.contains("run: 12 curves over 20000 points"), "{}", &page[..600]);
+    for outside in ["http://", "https://", " src=", "<link", "import "] {
+        assert!(!page.contains(outside), "the page refers outside itself: {outside}");
+    }
+    // The curves' segments: 2 vertices of 3 floats each, as in curves.ply.
+    let curves = crease::curves::read_ply(&run.join("curves.ply")).unwrap();
+    let segments: usize = curves.iter().map(|c| c.segment_count()).sum();
+    let lines = page.split("lin = dec(\"").nth(1).unwrap().split('"').next().unwrap();
+    assert_eq!(lines.len().div_ceil(4) * 3 - lines.matches('=').count(), segments * 2 * 3 * 4);
+    let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(["view", d.path().to_str().unwrap()]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a crease run directory"));
+}

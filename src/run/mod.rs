@@ -731,19 +731,7 @@ impl<'a> Run<'a> {
     /// About [`PREVIEW_POINTS`](crate::preview::PREVIEW_POINTS) of the cloud's points, chosen
     /// by position key from the tile store, in tile order.
     fn preview_sample(&self) -> Result<Vec<DVec3>> {
-        let total: u64 = self.manifest.tile_points.iter().sum();
-        let share = crate::preview::PREVIEW_POINTS / total.max(1) as f64;
-        let store = Store::new(&self.ws)?;
-        let parts: Vec<Vec<DVec3>> = self
-            .tiles
-            .par_iter()
-            .map(|&t| {
-                let mut tp = TilePoints::default();
-                store.read(t, &mut tp, |p, _| keep_point(position_key(p, self.kq) ^ 0x9E37_79B9, share, 1))?;
-                Ok(tp.xyz)
-            })
-            .collect::<Result<_>>()?;
-        Ok(parts.concat())
+        sample_tiles(&self.ws, &self.manifest, &self.tiles, crate::preview::PREVIEW_POINTS)
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -774,17 +762,67 @@ impl<'a> Run<'a> {
     }
 }
 
+/// About `points` of the run's points, chosen by position key (so the same whatever the
+/// tiling), read from the tile store.
+fn sample_tiles(ws: &Workspace, manifest: &Manifest, tiles: &[u32], points: f64) -> Result<Vec<DVec3>> {
+    let total: u64 = manifest.tile_points.iter().sum();
+    let share = points / total.max(1) as f64;
+    let kq = key_quantum(manifest.diag);
+    let store = Store::new(ws)?;
+    let parts: Vec<Vec<DVec3>> = tiles
+        .par_iter()
+        .map(|&t| {
+            let mut tp = TilePoints::default();
+            store.read(t, &mut tp, |p, _| keep_point(position_key(p, kq) ^ 0x9E37_79B9, share, 1))?;
+            Ok(tp.xyz)
+        })
+        .collect::<Result<_>>()?;
+    Ok(parts.concat())
+}
+
+/// Writes `view.html` into the finished run directory `dir`: its curves (from `curves.ply`)
+/// over a sample of its points, to turn and zoom in a browser. Returns the page's path.
+///
+/// ```no_run
+/// let page = crease::run::write_view(std::path::Path::new("run"))?;
+/// println!("open {}", page.display());
+/// # Ok::<(), crease::Error>(())
+/// ```
+pub fn write_view(dir: &Path) -> Result<PathBuf> {
+    let ws = Workspace::disk(dir)?;
+    let m = manifest::read(&ws)?.ok_or_else(|| Error::input(dir, "not a crease run directory (no manifest.json)"))?;
+    if !m.finished {
+        return Err(Error::input(dir, "the run has not finished: run crease extract on it first"));
+    }
+    let tiles: Vec<u32> = (0..m.tile_points.len() as u32).filter(|&t| m.tile_points[t as usize] > 0).collect();
+    let points = sample_tiles(&ws, &m, &tiles, crate::view::VIEW_POINTS)?;
+    let curves = crate::curves::read_ply(&dir.join("curves.ply"))?;
+    let crs = std::fs::read(dir.join("report.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|r| serde_json::from_value::<Crs>(r["crs"].clone()).ok())
+        .unwrap_or_default();
+    let title = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string());
+    let page = dir.join(VIEW);
+    crate::view::write_html(&page, &title, &points, &curves, &crs)?;
+    Ok(page)
+}
+
 /// True if `f` (canonical) is a file or directory a run in `dir` (canonical) writes.
 fn is_run_file(dir: &Path, f: &Path) -> bool {
     let Ok(rel) = f.strip_prefix(dir) else {
         return false;
     };
     let top = rel.components().next().map(|c| c.as_os_str().to_string_lossy().into_owned()).unwrap_or_default();
-    [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "out.tmp", manifest::NAME, "lock"].contains(&top.as_str()) || OUTPUTS.contains(&top.as_str())
+    [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "out.tmp", manifest::NAME, "lock", VIEW].contains(&top.as_str())
+        || OUTPUTS.contains(&top.as_str())
 }
 
 /// The files a finished run writes into its directory.
 pub const OUTPUTS: [&str; 5] = ["curves.obj", "curves.ply", "curves.geojson", "preview.png", "report.json"];
+
+/// Written on demand by [`write_view`].
+const VIEW: &str = "view.html";
 
 fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs, sample: &[DVec3]) -> Result<()> {
     // Each output goes to a temporary name first, then is renamed into place.
