@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Fuzzes crease's readers (LAS, LAZ, PLY, E57) and a resumed run's manifest with cargo-fuzz
+# Fuzzes crease's readers (LAS, LAZ, PLY, E57, text) and a resumed run's manifest with cargo-fuzz
 # (libFuzzer, AddressSanitizer), each target for SECONDS, one after the other.
 #
-#   scripts/fuzz.sh [SECONDS] [TARGET...]     (default: 300 s each; las laz ply e57 manifest)
+#   scripts/fuzz.sh [SECONDS] [TARGET...]     (default: 300 s each; las laz ply e57 text manifest)
 #
 # Needs a nightly toolchain (`rustup toolchain install nightly`) and `cargo install cargo-fuzz`.
 # Seeds are generated (small synthetic clouds in each format) plus the small files of
@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 SECONDS_EACH=${1:-300}
 shift || true
 TARGETS=("$@")
-[ ${#TARGETS[@]} -gt 0 ] || TARGETS=(las laz ply e57 manifest)
+[ ${#TARGETS[@]} -gt 0 ] || TARGETS=(las laz ply e57 text manifest)
 FUZZ=scripts/fuzz
 SHARED=../shared/data/real
 
@@ -22,7 +22,9 @@ cargo build --release --quiet
 seeds=$(mktemp -d)
 trap 'rm -rf "$seeds"' EXIT
 for fmt in las laz ply; do mkdir -p "$FUZZ/corpus/$fmt"; done
-mkdir -p "$FUZZ/corpus/manifest" "$FUZZ/corpus/e57"
+mkdir -p "$FUZZ/corpus/manifest" "$FUZZ/corpus/e57" "$FUZZ/corpus/text"
+printf 'x;y;z;class\n0.5;1;2;6\n1e3 2 3 4\n7\n' > "$FUZZ/corpus/text/seed-header.csv"
+printf '3\n0 0 0 -10 1 2 3\n1 0 0 5 1 2 3\n0 1 0 5 1 2 3\n' > "$FUZZ/corpus/text/seed.pts"
 # The e57 target patches a valid file of its own; its seed is 'no patch'.
 printf '\377' > "$FUZZ/corpus/e57/seed-whole"
 # Small clouds: a few hundred points keep executions fast; libFuzzer grows inputs from them.
