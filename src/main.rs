@@ -125,61 +125,7 @@ enum Cmd {
         json: bool,
     },
     /// Extracts feature curves; writes curves.obj, curves.ply, curves.geojson and report.json.
-    Extract {
-        /// Input files or directories (a directory is one cloud made of all its point files).
-        #[arg(required = true)]
-        paths: Vec<PathBuf>,
-        /// Search directories' subdirectories too.
-        #[arg(long, short)]
-        recursive: bool,
-        /// Print a JSON summary of each run on stdout (its outputs and report).
-        #[arg(long)]
-        json: bool,
-        /// Output directory.
-        #[arg(short, long)]
-        out: PathBuf,
-        #[command(flatten)]
-        filter: FilterArgs,
-        #[command(flatten)]
-        params: ParamArgs,
-        /// Worker threads (default: all cores).
-        #[arg(long)]
-        threads: Option<usize>,
-        /// Memory budget, e.g. 1G or 512M (default: half of the machine's memory); sets the
-        /// tile size (at most about 2 M points a tile).
-        #[arg(long, value_parser = parse_size)]
-        memory: Option<u64>,
-        /// Tile edge length in model units (overrides the size derived from --memory).
-        #[arg(long)]
-        tile_size: Option<f64>,
-        /// Start over, whatever the output directory holds (without it, a run continues the same
-        /// job and refuses a different one).
-        #[arg(long)]
-        force: bool,
-        /// Process each input file on its own, with outputs in OUT/<file stem>/.
-        #[arg(long)]
-        per_file: bool,
-        /// Print nothing but errors.
-        #[arg(long, short)]
-        quiet: bool,
-        /// Write the intermediate point sets (candidates per tile, edge cloud, smoothed edge
-        /// cloud, corners, grown polylines) to this directory as OBJ files (also taken from
-        /// the environment variable CREASE_DEBUG_DIR).
-        #[arg(long)]
-        debug_dir: Option<PathBuf>,
-        /// Leave out curves whose confidence (0 to 1, written to every output) is below this:
-        /// higher trades recall for precision. Changing it on a finished run rewrites the
-        /// outputs without recomputing the tiles.
-        #[arg(long, default_value_t = crease::extract::polylines::DEFAULT_MIN_CONFIDENCE)]
-        min_confidence: f64,
-        /// Leave out curves shorter than this, in model units.
-        #[arg(long, default_value_t = 0.0)]
-        min_length: f64,
-        /// The outputs' CRS, whatever the inputs say: EPSG:N or a WKT (an output setting, as
-        /// --min-confidence; no reprojection).
-        #[arg(long, value_name = "EPSG:N|WKT", value_parser = parse_crs)]
-        a_srs: Option<Box<crease::crs::Crs>>,
-    },
+    Extract(ExtractArgs),
     /// Tells what a run directory has done and what is left.
     Status {
         /// The run directory.
@@ -417,44 +363,7 @@ fn run(cli: Cli) -> Result<(), Error> {
             eprintln!("wrote {}", page.display());
         }
         Cmd::Man => clap_mangen::Man::new(Cli::command()).render(&mut std::io::stdout()).map_err(|e| Error::output("stdout", e))?,
-        Cmd::Extract {
-            paths,
-            out,
-            filter,
-            params,
-            threads,
-            memory,
-            tile_size,
-            force,
-            per_file,
-            quiet,
-            debug_dir,
-            min_confidence,
-            min_length,
-            a_srs,
-            recursive,
-            json,
-        } => {
-            let args = ExtractArgs {
-                paths,
-                out,
-                filter,
-                params,
-                threads,
-                memory,
-                tile_size,
-                force,
-                per_file,
-                quiet,
-                debug_dir,
-                min_confidence,
-                min_length,
-                a_srs,
-                recursive,
-                json,
-            };
-            extract_cmd(args)?
-        }
+        Cmd::Extract(args) => extract_cmd(args)?,
         Cmd::Status { dir, json } => {
             let s = crease::run::status(&dir)?;
             if json {
@@ -468,23 +377,61 @@ fn run(cli: Cli) -> Result<(), Error> {
 }
 
 /// The arguments of `crease extract`.
+#[derive(Args)]
 struct ExtractArgs {
+    /// Input files or directories (a directory is one cloud made of all its point files).
+    #[arg(required = true)]
     paths: Vec<PathBuf>,
-    out: PathBuf,
-    filter: FilterArgs,
-    params: ParamArgs,
-    threads: Option<usize>,
-    memory: Option<u64>,
-    tile_size: Option<f64>,
-    force: bool,
-    per_file: bool,
-    quiet: bool,
-    debug_dir: Option<PathBuf>,
-    min_confidence: f64,
-    min_length: f64,
-    a_srs: Option<Box<crease::crs::Crs>>,
+    /// Search directories' subdirectories too.
+    #[arg(long, short)]
     recursive: bool,
+    /// Print a JSON summary of each run on stdout (its outputs and report).
+    #[arg(long)]
     json: bool,
+    /// Output directory.
+    #[arg(short, long)]
+    out: PathBuf,
+    #[command(flatten)]
+    filter: FilterArgs,
+    #[command(flatten)]
+    params: ParamArgs,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Memory budget, e.g. 1G or 512M (default: half of the machine's memory); sets the
+    /// tile size (at most about 2 M points a tile).
+    #[arg(long, value_parser = parse_size)]
+    memory: Option<u64>,
+    /// Tile edge length in model units (overrides the size derived from --memory).
+    #[arg(long)]
+    tile_size: Option<f64>,
+    /// Start over, whatever the output directory holds (without it, a run continues the same
+    /// job and refuses a different one).
+    #[arg(long)]
+    force: bool,
+    /// Process each input file on its own, with outputs in OUT/<file stem>/.
+    #[arg(long)]
+    per_file: bool,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    quiet: bool,
+    /// Write the intermediate point sets (candidates per tile, edge cloud, smoothed edge
+    /// cloud, corners, grown polylines) to this directory as OBJ files (also taken from
+    /// the environment variable CREASE_DEBUG_DIR).
+    #[arg(long)]
+    debug_dir: Option<PathBuf>,
+    /// Leave out curves whose confidence (0 to 1, written to every output) is below this:
+    /// higher trades recall for precision. Changing it on a finished run rewrites the
+    /// outputs without recomputing the tiles.
+    #[arg(long, default_value_t = crease::extract::polylines::DEFAULT_MIN_CONFIDENCE)]
+    min_confidence: f64,
+    /// Leave out curves shorter than this, in model units.
+    #[arg(long, default_value_t = 0.0)]
+    min_length: f64,
+    /// The outputs' CRS, whatever the inputs say: EPSG:N or a WKT (an output setting, as
+    /// --min-confidence; no reprojection).
+    #[arg(long, value_name = "EPSG:N|WKT", value_parser = parse_crs)]
+    a_srs: Option<Box<crease::crs::Crs>>,
 }
 
 fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
