@@ -2,7 +2,7 @@
 # Opens a run's curves with GDAL as a GIS user would (Debian's gdal-bin): curves.geojson with
 # ogrinfo (feature count against report.json, the CRS GDAL sees against the run's), then
 # converted to Shapefile, FlatGeobuf and GeoPackage with ogr2ogr (feature count, CRS and the
-# per-curve fields kept).
+# per-curve fields kept), and the run's own curves.gpkg when it wrote one (--format gpkg).
 #
 #   scripts/gis-check.sh RUN_DIR...        (runs made by `crease extract`)
 #
@@ -16,10 +16,15 @@ for run in "$@"; do
   # Without a code, the CRS's name (the WKT's first quoted string) is what GDAL must show.
   name=$(python3 -c "import json,sys; w=json.load(open(sys.argv[1]))['crs']['wkt']; print(w.split('\"')[1] if w else '')" "$run/report.json")
   tmp=$(mktemp -d)
-  for fmt in "GeoJSON:geojson" "ESRI Shapefile:shp" "FlatGeobuf:fgb" "GPKG:gpkg"; do
+  formats=("GeoJSON:geojson" "ESRI Shapefile:shp" "FlatGeobuf:fgb" "GPKG:gpkg")
+  # (A run written with --format gpkg: its own GeoPackage too.)
+  [ -f "$run/curves.gpkg" ] && formats+=("native:curves.gpkg")
+  for fmt in "${formats[@]}"; do
     driver=${fmt%%:*}; ext=${fmt##*:}
     src="$run/curves.geojson"
-    if [ "$ext" != geojson ]; then
+    if [ "$driver" = native ]; then
+      src="$run/$ext"
+    elif [ "$ext" != geojson ]; then
       ogr2ogr -f "$driver" "$tmp/curves.$ext" "$src" 2>/dev/null
       src="$tmp/curves.$ext"
     fi

@@ -385,6 +385,9 @@ struct ExtractArgs {
     /// Search directories' subdirectories too.
     #[arg(long, short)]
     recursive: bool,
+    /// The curve files to write (comma-separated; preview.png and report.json always are).
+    #[arg(long, value_delimiter = ',', default_values = ["obj", "ply", "geojson"])]
+    format: Vec<crease::curves::Format>,
     /// Print a JSON summary of each run on stdout (its outputs and report).
     #[arg(long)]
     json: bool,
@@ -437,6 +440,7 @@ struct ExtractArgs {
 fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
     let ExtractArgs {
         recursive,
+        format,
         json,
         paths,
         out,
@@ -490,6 +494,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         warn,
         assign_crs: a_srs.map(|c| *c),
         recursive,
+        formats: format,
     };
     let params = params.params()?;
     let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {
@@ -507,7 +512,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
     for (inputs, dir) in jobs {
         let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter()?, &opts)?;
         if json {
-            let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).collect();
+            let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).filter(|f| f.is_file()).collect();
             summaries.push(serde_json::json!({"dir": dir, "outputs": outputs, "report": r}));
         }
         if !quiet {

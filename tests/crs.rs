@@ -58,6 +58,26 @@ fn a_wkt_in_a_later_evlr_names_every_output() {
     assert_eq!(crease::curves::read_ply(&run.join("curves.ply")).unwrap().len(), 12);
     assert_eq!(crease::curves::read_obj(&run.join("curves.obj")).unwrap().len(), 12);
 
+    // GeoPackage: the SRS table holds the CRS (code and WKT), each curve one LineString Z row.
+    let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q", "--format", "gpkg,obj"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!run.join("curves.ply").exists() && !run.join("curves.geojson").exists(), "formats not asked for are removed");
+    let db = rusqlite::Connection::open(run.join("curves.gpkg")).unwrap();
+    let app: i64 = db.query_row("PRAGMA application_id", [], |r| r.get(0)).unwrap();
+    assert_eq!(app, 0x4750_4B47, "'GPKG'");
+    let (org, def): (String, String) =
+        db.query_row("SELECT organization, definition FROM gpkg_spatial_ref_sys WHERE srs_id = 25832", [], |r| Ok((r.get(0)?, r.get(1)?))).unwrap();
+    assert_eq!((org.as_str(), def.as_str()), ("EPSG", WKT));
+    let rows: Vec<(Vec<u8>, String)> =
+        db.prepare("SELECT geom, corners FROM curves").unwrap().query_map([], |r| Ok((r.get(0)?, r.get(1)?))).unwrap().map(Result::unwrap).collect();
+    assert_eq!(rows.len(), 12);
+    for (g, _) in &rows {
+        assert_eq!(&g[..2], b"GP");
+        assert_eq!(i32::from_le_bytes(g[4..8].try_into().unwrap()), 25832);
+        assert_eq!(u32::from_le_bytes(g[57..61].try_into().unwrap()), 1002, "LineString Z");
+    }
+    assert!(rows.iter().any(|(_, c)| !c.is_empty()), "cube edges end at corners");
+
     // --a-srs: the outputs carry the assigned CRS, and the replaced one is named in a warning.
     let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q", "--a-srs", "EPSG:4258"]);
     assert_eq!(code, 0, "{err}");

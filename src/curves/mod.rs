@@ -1,15 +1,59 @@
-//! Feature curves: the [`Polyline`] type and its readers and writers (OBJ, PLY, GeoJSON).
+//! Feature curves: the [`Polyline`] type and its readers and writers (OBJ, PLY, GeoJSON,
+//! GeoPackage).
 
 mod geojson;
+mod gpkg;
 mod obj;
 mod ply;
 
 pub use geojson::write_geojson;
+pub use gpkg::write_gpkg;
 pub use obj::{read_obj, write_obj};
 pub use ply::{read_ply, write_ply};
 
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
+
+/// The curve file formats a run can write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// Wavefront OBJ polylines (`curves.obj`).
+    Obj,
+    /// Binary PLY with both normals per vertex (`curves.ply`).
+    Ply,
+    /// GeoJSON LineStrings (`curves.geojson`).
+    Geojson,
+    /// OGC GeoPackage (`curves.gpkg`).
+    Gpkg,
+}
+
+impl Format {
+    /// Every format, in the order written.
+    pub const ALL: [Format; 4] = [Format::Obj, Format::Ply, Format::Geojson, Format::Gpkg];
+    /// What a run writes unless told otherwise.
+    pub const DEFAULT: [Format; 3] = [Format::Obj, Format::Ply, Format::Geojson];
+
+    /// The output's file name.
+    pub fn file_name(self) -> &'static str {
+        match self {
+            Format::Obj => "curves.obj",
+            Format::Ply => "curves.ply",
+            Format::Geojson => "curves.geojson",
+            Format::Gpkg => "curves.gpkg",
+        }
+    }
+
+    /// Writes `curves` in this format.
+    pub fn write(self, path: &std::path::Path, curves: &[Polyline], crs: &crate::crs::Crs) -> crate::Result<()> {
+        match self {
+            Format::Obj => write_obj(path, curves, crs),
+            Format::Ply => write_ply(path, curves, crs),
+            Format::Geojson => write_geojson(path, curves, crs),
+            Format::Gpkg => write_gpkg(path, curves, crs),
+        }
+    }
+}
 
 /// One vertex of a feature curve.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

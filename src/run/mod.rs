@@ -27,7 +27,7 @@ pub use plan::{tile_size_for, BYTES_PER_POINT, MAX_TILE_POINTS};
 pub use status::{render_status, status, Status};
 
 use crate::cancel::Cancel;
-use crate::curves::{write_geojson, write_obj, write_ply, Polyline};
+use crate::curves::{Format, Polyline};
 use crate::debug::DebugDump;
 use crate::error::{Error, Result};
 use crate::extract::candidates::{self, ResidualSum};
@@ -75,6 +75,8 @@ pub struct RunOptions {
     pub assign_crs: Option<Crs>,
     /// Input directories are searched in their subdirectories too.
     pub recursive: bool,
+    /// The curve files written (an output setting).
+    pub formats: Vec<Format>,
 }
 
 impl Default for RunOptions {
@@ -92,6 +94,7 @@ impl Default for RunOptions {
             warn: |_| {},
             assign_crs: None,
             recursive: false,
+            formats: Format::DEFAULT.to_vec(),
         }
     }
 }
@@ -403,7 +406,7 @@ fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>
         }
         _ => {}
     }
-    for name in [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "curves.obj", "curves.ply", "curves.geojson", "preview.png", "report.json"] {
+    for name in [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, VIEW].into_iter().chain(OUTPUTS) {
         ws.remove(name);
     }
     let (b, declared) = bounds()?;
@@ -721,7 +724,7 @@ impl<'a> Run<'a> {
     /// The write step: the outputs, then the manifest marked finished.
     fn write(&mut self, curves: &[Polyline], crs: &Crs) -> Result<()> {
         let t = Instant::now();
-        write_outputs(self.ws.root(), curves, crs, &self.preview_sample()?)?;
+        write_outputs(self.ws.root(), curves, crs, &self.preview_sample()?, &self.opts.formats)?;
         self.manifest.finished = true;
         manifest::save(&self.ws, &self.manifest)?;
         self.pass.writing = t.elapsed().as_secs_f64();
@@ -819,28 +822,28 @@ fn is_run_file(dir: &Path, f: &Path) -> bool {
 }
 
 /// The files a finished run writes into its directory.
-pub const OUTPUTS: [&str; 5] = ["curves.obj", "curves.ply", "curves.geojson", "preview.png", "report.json"];
+pub const OUTPUTS: [&str; 6] = ["curves.obj", "curves.ply", "curves.geojson", "curves.gpkg", "preview.png", "report.json"];
 
 /// Written on demand by [`write_view`].
 const VIEW: &str = "view.html";
 
-fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs, sample: &[DVec3]) -> Result<()> {
+fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs, sample: &[DVec3], formats: &[Format]) -> Result<()> {
     // Each output goes to a temporary name first, then is renamed into place.
     let tmp = dir.join("out.tmp");
     std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
     let (written, preview) = rayon::join(
-        || {
-            write_obj(&tmp.join("curves.obj"), curves, crs)?;
-            write_ply(&tmp.join("curves.ply"), curves, crs)?;
-            write_geojson(&tmp.join("curves.geojson"), curves, crs)
-        },
+        || formats.iter().try_for_each(|f| f.write(&tmp.join(f.file_name()), curves, crs)),
         || crate::preview::write_png(&tmp.join("preview.png"), sample, curves),
     );
     written.and(preview)?;
-    for f in ["curves.obj", "curves.ply", "curves.geojson", "preview.png"] {
+    for f in formats.iter().map(|f| f.file_name()).chain(["preview.png"]) {
         let p = tmp.join(f);
         std::fs::File::open(&p).and_then(|f| f.sync_all()).map_err(|e| Error::output(&p, e))?;
         std::fs::rename(&p, dir.join(f)).map_err(|e| Error::output(&p, e))?;
+    }
+    // (An output of a format not asked for this time would be stale.)
+    for f in Format::ALL.iter().filter(|f| !formats.contains(f)) {
+        let _ = std::fs::remove_file(dir.join(f.file_name()));
     }
     let _ = std::fs::remove_dir(&tmp);
     Ok(())
