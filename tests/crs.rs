@@ -78,6 +78,28 @@ fn a_wkt_in_a_later_evlr_names_every_output() {
     }
     assert!(rows.iter().any(|(_, c)| !c.is_empty()), "cube edges end at corners");
 
+    // DXF: each curve a 3D polyline on its layer, each corner a point on another.
+    let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q", "--format", "dxf"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!run.join("curves.gpkg").exists());
+    let drawing = dxf::Drawing::load_file(run.join("curves.dxf")).unwrap();
+    let (mut lines, mut corners) = (0, 0);
+    for e in drawing.entities() {
+        match &e.specific {
+            dxf::entities::EntityType::Polyline(p) => {
+                assert!(p.is_3d_polyline() && e.common.layer == "crease_curves");
+                assert!(p.vertices().count() >= 2);
+                lines += 1;
+            }
+            dxf::entities::EntityType::ModelPoint(_) => {
+                assert_eq!(e.common.layer, "crease_corners");
+                corners += 1;
+            }
+            _ => {}
+        }
+    }
+    assert_eq!((lines, corners), (12, 8));
+
     // --a-srs: the outputs carry the assigned CRS, and the replaced one is named in a warning.
     let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q", "--a-srs", "EPSG:4258"]);
     assert_eq!(code, 0, "{err}");

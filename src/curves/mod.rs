@@ -1,11 +1,13 @@
 //! Feature curves: the [`Polyline`] type and its readers and writers (OBJ, PLY, GeoJSON,
-//! GeoPackage).
+//! GeoPackage, DXF).
 
+mod dxf;
 mod geojson;
 mod gpkg;
 mod obj;
 mod ply;
 
+pub use self::dxf::write_dxf;
 pub use geojson::write_geojson;
 pub use gpkg::write_gpkg;
 pub use obj::{read_obj, write_obj};
@@ -26,11 +28,13 @@ pub enum Format {
     Geojson,
     /// OGC GeoPackage (`curves.gpkg`).
     Gpkg,
+    /// DXF 3D polylines for CAD (`curves.dxf`).
+    Dxf,
 }
 
 impl Format {
     /// Every format, in the order written.
-    pub const ALL: [Format; 4] = [Format::Obj, Format::Ply, Format::Geojson, Format::Gpkg];
+    pub const ALL: [Format; 5] = [Format::Obj, Format::Ply, Format::Geojson, Format::Gpkg, Format::Dxf];
     /// What a run writes unless told otherwise.
     pub const DEFAULT: [Format; 3] = [Format::Obj, Format::Ply, Format::Geojson];
 
@@ -41,6 +45,7 @@ impl Format {
             Format::Ply => "curves.ply",
             Format::Geojson => "curves.geojson",
             Format::Gpkg => "curves.gpkg",
+            Format::Dxf => "curves.dxf",
         }
     }
 
@@ -51,6 +56,7 @@ impl Format {
             Format::Ply => write_ply(path, curves, crs),
             Format::Geojson => write_geojson(path, curves, crs),
             Format::Gpkg => write_gpkg(path, curves, crs),
+            Format::Dxf => write_dxf(path, curves, crs),
         }
     }
 }

@@ -822,7 +822,7 @@ fn is_run_file(dir: &Path, f: &Path) -> bool {
 }
 
 /// The files a finished run writes into its directory.
-pub const OUTPUTS: [&str; 6] = ["curves.obj", "curves.ply", "curves.geojson", "curves.gpkg", "preview.png", "report.json"];
+pub const OUTPUTS: [&str; 7] = ["curves.obj", "curves.ply", "curves.geojson", "curves.gpkg", "curves.dxf", "preview.png", "report.json"];
 
 /// Written on demand by [`write_view`].
 const VIEW: &str = "view.html";
