@@ -282,18 +282,6 @@ enum Points {
     Compressed { reader: Box<las::Reader>, buf: las::PointData },
 }
 
-/// Releases decoded pages of a read-only map from this process's resident set, so that reading
-/// a file larger than memory keeps RSS flat (the kernel may keep them in its page cache).
-fn release(map: &Mmap, start: usize, end: usize) {
-    const PAGE: usize = 4096;
-    let (a, b) = (start / PAGE * PAGE, end / PAGE * PAGE);
-    if b > a {
-        // SAFETY: the map is read-only and file-backed; dropped pages are re-read from the file
-        // if touched again, so no data is lost and no reference sees changed contents.
-        let _ = unsafe { map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, a, b - a) };
-    }
-}
-
 /// A chunked reader over one LAS or LAZ file.
 pub struct LasReader {
     path: PathBuf,
@@ -344,7 +332,7 @@ impl LasReader {
             Points::Mapped { map, offset } => {
                 let start = *offset + self.next as usize * rl;
                 self.layout.decode(&map[start..start + n * rl], self.next, out, table, keep_withheld);
-                release(map, start, start + n * rl);
+                super::release(map, start, start + n * rl);
             }
             Points::Compressed { reader, buf } => {
                 let path = &self.path;

@@ -85,6 +85,18 @@ pub(crate) fn guarded<T>(path: &Path, what: &str, f: impl FnOnce() -> Result<T>)
     r.unwrap_or_else(|p| Err(Error::input(path, format!("corrupt point data ({what} failed: {})", crate::error::panic_message(&p).replace('\n', " ")))))
 }
 
+/// Releases decoded pages of a read-only map from this process's resident set, so that reading
+/// a file larger than memory keeps RSS flat (the kernel may keep them in its page cache).
+pub(crate) fn release(map: &memmap2::Mmap, start: usize, end: usize) {
+    const PAGE: usize = 4096;
+    let (a, b) = (start / PAGE * PAGE, end / PAGE * PAGE);
+    if b > a {
+        // SAFETY: the map is read-only and file-backed; dropped pages are re-read from the file
+        // if touched again, so no data is lost and no reference sees changed contents.
+        let _ = unsafe { map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, a, b - a) };
+    }
+}
+
 /// Guesses the format of `path` from its extension.
 pub fn format_of(path: &Path) -> Option<FileFormat> {
     let ext = path.extension()?.to_str()?.to_ascii_lowercase();

@@ -119,6 +119,7 @@ impl TextReader {
         let Some(map) = &self.map else { return Ok(0) };
         let bytes: &[u8] = map;
         let need = self.cols.xyz.iter().copied().chain(self.cols.class).max().unwrap_or(2) + 1;
+        let start = self.pos;
         let mut read = 0;
         while read < max && self.pos < bytes.len() {
             let end = bytes[self.pos..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |k| self.pos + k);
@@ -167,6 +168,7 @@ impl TextReader {
             self.next += 1;
             read += 1;
         }
+        super::release(map, start, self.pos.min(bytes.len()));
         Ok(read)
     }
 }
