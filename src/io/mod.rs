@@ -97,17 +97,31 @@ pub(crate) fn release(map: &memmap2::Mmap, start: usize, end: usize) {
     }
 }
 
+/// The extensions crease reads, and their formats.
+const EXTENSIONS: [(&str, FileFormat); 8] = [
+    ("las", FileFormat::Las),
+    ("laz", FileFormat::Laz),
+    ("ply", FileFormat::Ply),
+    ("e57", FileFormat::E57),
+    ("xyz", FileFormat::Text),
+    ("pts", FileFormat::Text),
+    ("csv", FileFormat::Text),
+    ("txt", FileFormat::Text),
+];
+
+/// The extensions crease reads, as a message lists them: ".las, .laz, ...".
+fn extension_list() -> String {
+    EXTENSIONS.iter().map(|(e, _)| format!(".{e}")).collect::<Vec<_>>().join(", ")
+}
+
+fn unknown_type(path: &Path) -> Error {
+    Error::input(path, format!("unknown file type (expected {})", extension_list()))
+}
+
 /// Guesses the format of `path` from its extension.
 pub fn format_of(path: &Path) -> Option<FileFormat> {
     let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-    match ext.as_str() {
-        "las" => Some(FileFormat::Las),
-        "laz" => Some(FileFormat::Laz),
-        "ply" => Some(FileFormat::Ply),
-        "e57" => Some(FileFormat::E57),
-        "xyz" | "pts" | "csv" | "txt" => Some(FileFormat::Text),
-        _ => None,
-    }
+    EXTENSIONS.iter().find(|(e, _)| *e == ext).map(|&(_, f)| f)
 }
 
 /// The point files the user's paths name, and what was passed over.
@@ -134,15 +148,15 @@ impl Inputs {
                 let shown = names.iter().take(5).cloned().collect::<Vec<_>>().join(", ");
                 let more = if names.len() > 5 { format!(" and {} more", names.len() - 5) } else { String::new() };
                 let entries = if names.len() == 1 { "entry that is not a point file" } else { "entries that are not point files" };
-                out.push(format!("{}: passed over {} {entries} (.las, .laz, .ply, .e57, .xyz, .pts, .csv, .txt): {shown}{more}", dir.display(), names.len()));
+                out.push(format!("{}: passed over {} {entries} ({}): {shown}{more}", dir.display(), names.len(), extension_list()));
             }
         }
         out
     }
 }
 
-/// Expands the user's paths: files are kept as given, directories are replaced by the point
-/// files (`.las`, `.laz`, `.ply`) inside them (`recursive`: in their subdirectories too),
+/// Expands the user's paths: files are kept as given, directories are replaced by the
+/// point files (see [`format_of`]) inside them (`recursive`: in their subdirectories too),
 /// sorted by path. Other entries of a directory are passed over, and named in a warning.
 pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
     let mut out = Inputs::default();
@@ -167,7 +181,7 @@ pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
             }
             if files.is_empty() {
                 let where_ = if recursive { "directory tree" } else { "directory" };
-                return Err(Error::input(p, format!("{where_} holds no point files (.las, .laz, .ply, .e57, .xyz, .pts, .csv, .txt)")));
+                return Err(Error::input(p, format!("{where_} holds no point files ({})", extension_list())));
             }
             files.sort();
             out.files.extend(files);
@@ -177,7 +191,7 @@ pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
             }
         } else {
             if format_of(p).is_none() {
-                return Err(Error::input(p, "unknown file type (expected .las, .laz, .ply, .e57, .xyz, .pts, .csv or .txt)"));
+                return Err(unknown_type(p));
             }
             // (A FIFO or a device would block or never end.)
             if !meta.is_file() {
@@ -203,7 +217,7 @@ pub fn read_header(path: &Path) -> Result<CloudHeader> {
         Some(FileFormat::Ply) => Ok(ply::PlyReader::open(path)?.header().clone()),
         Some(FileFormat::E57) => Ok(e57::E57Reader::open(path)?.header().clone()),
         Some(FileFormat::Text) => Ok(text::TextReader::open(path, None)?.header().clone()),
-        None => Err(Error::input(path, "unknown file type (expected .las, .laz, .ply, .e57, .xyz, .pts, .csv or .txt)")),
+        None => Err(unknown_type(path)),
     }
 }
 
@@ -258,7 +272,7 @@ impl PointReader {
             Some(FileFormat::Ply) => Inner::Ply(ply::PlyReader::open(path)?),
             Some(FileFormat::E57) => Inner::E57(Box::new(e57::E57Reader::open(path)?)),
             Some(FileFormat::Text) => Inner::Text(text::TextReader::open(path, filter.text)?),
-            None => return Err(Error::input(path, "unknown file type (expected .las, .laz, .ply, .e57, .xyz, .pts, .csv or .txt)")),
+            None => return Err(unknown_type(path)),
         };
         Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise })
     }
