@@ -360,7 +360,8 @@ fn run(cli: Cli) -> Result<(), Error> {
         Cmd::Completions { shell } => clap_complete::generate(shell, &mut Cli::command(), "crease", &mut std::io::stdout()),
         Cmd::View { dir } => {
             let page = crease::run::write_view(&dir)?;
-            eprintln!("wrote {}", page.display());
+            let cleaned = crease::run::status(&dir).is_ok_and(|s| s.cleaned);
+            eprintln!("wrote {}{}", page.display(), if cleaned { " (the curves alone: the run's points were removed with --clean)" } else { "" });
         }
         Cmd::Man => clap_mangen::Man::new(Cli::command()).render(&mut std::io::stdout()).map_err(|e| Error::output("stdout", e))?,
         Cmd::Extract(args) => extract_cmd(args)?,
@@ -415,6 +416,17 @@ struct ExtractArgs {
     /// Process each input file on its own, with outputs in OUT/<file stem>/.
     #[arg(long)]
     per_file: bool,
+    /// Keep the working data (the tile store and per-tile results, about 0.7 times the size
+    /// of a LAS input, more for LAZ) in this directory instead of the output directory, e.g.
+    /// on a scratch disk (with --per-file, in a subdirectory per file). A resumed run keeps
+    /// the one it started with.
+    #[arg(long, value_name = "DIR")]
+    work_dir: Option<PathBuf>,
+    /// Remove the working data once the outputs are written. The run then cannot be resumed,
+    /// given other output filters, or viewed over its points (`crease view` draws the curves
+    /// alone).
+    #[arg(long)]
+    clean: bool,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -451,6 +463,8 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         tile_size,
         force,
         per_file,
+        work_dir,
+        clean,
         quiet,
         debug_dir,
         min_confidence,
@@ -495,21 +509,25 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         assign_crs: a_srs.map(|c| *c),
         recursive,
         formats: format,
+        work_dir: None,
+        clean,
     };
     let params = params.params()?;
-    let jobs: Vec<(Vec<PathBuf>, PathBuf)> = if per_file {
+    let jobs: Vec<(Vec<PathBuf>, PathBuf, Option<PathBuf>)> = if per_file {
         input_files(&paths, recursive)?
             .into_iter()
             .map(|f| {
                 let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-                (vec![f], out.join(stem))
+                let work = work_dir.as_ref().map(|w| w.join(&stem));
+                (vec![f], out.join(stem), work)
             })
             .collect()
     } else {
-        vec![(paths, out)]
+        vec![(paths, out, work_dir)]
     };
     let mut summaries = vec![];
-    for (inputs, dir) in jobs {
+    for (inputs, dir, work_dir) in jobs {
+        let opts = crease::run::RunOptions { work_dir, ..opts.clone() };
         let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter()?, &opts)?;
         if json {
             let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).filter(|f| f.is_file()).collect();

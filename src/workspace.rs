@@ -17,6 +17,9 @@ pub struct Workspace {
     memory: Option<Mutex<HashMap<String, Arc<Vec<u8>>>>>,
     /// The run directory's lock file, locked, once [`Workspace::lock`] took it.
     lock: Option<std::fs::File>,
+    /// Where the working files live when not in the run directory (see
+    /// [`Workspace::set_work_dir`]): that directory, and the top-level names that go there.
+    work: Option<(PathBuf, &'static [&'static str])>,
 }
 
 /// The lock file of a run directory.
@@ -26,12 +29,12 @@ impl Workspace {
     /// The run directory `dir` (created if needed).
     pub fn disk(dir: &Path) -> Result<Workspace> {
         std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
-        Ok(Workspace { root: dir.to_path_buf(), memory: None, lock: None })
+        Ok(Workspace { root: dir.to_path_buf(), memory: None, lock: None, work: None })
     }
 
     /// A workspace that keeps its files in memory.
     pub fn memory() -> Workspace {
-        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())), lock: None }
+        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())), lock: None, work: None }
     }
 
     /// Takes the run directory for this process until the workspace is dropped: an advisory
@@ -68,9 +71,23 @@ impl Workspace {
         &self.root
     }
 
+    /// Puts the files and directories named `names` (top-level names, such as `tiles`) in
+    /// `dir` instead of the run directory, from now on (created if needed). In memory, nothing
+    /// changes.
+    pub fn set_work_dir(&mut self, dir: &Path, names: &'static [&'static str]) -> Result<()> {
+        if self.memory.is_none() {
+            std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+            self.work = Some((dir.to_path_buf(), names));
+        }
+        Ok(())
+    }
+
     /// The path of `name` (for messages, and for files only disk runs write).
     pub fn path(&self, name: &str) -> PathBuf {
-        self.root.join(name)
+        match &self.work {
+            Some((dir, names)) if names.contains(&name.split('/').next().unwrap_or(name)) => dir.join(name),
+            _ => self.root.join(name),
+        }
     }
 
     fn files(&self) -> Option<std::sync::MutexGuard<'_, HashMap<String, Arc<Vec<u8>>>>> {

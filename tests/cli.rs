@@ -48,3 +48,55 @@ fn view_writes_a_self_contained_page() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a crease run directory"));
 }
+
+/// Runs crease and returns its exit code and standard error.
+fn run(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(args).output().unwrap();
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// `--work-dir` keeps the working data out of the run directory, with the same curves; a
+/// resumed run finds it without the flag, and refuses another; two runs cannot share one.
+/// `--clean` removes it once the outputs are written, and a cleaned run is not run again
+/// unless forced.
+#[test]
+fn working_data_goes_to_the_work_dir_and_clean_removes_it() {
+    let d = tempfile::tempdir().unwrap();
+    let p = |name: &str| d.path().join(name).to_str().unwrap().to_string();
+    let cube = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las");
+    let cube = cube.to_str().unwrap();
+    stdout(&["extract", cube, "-o", &p("plain"), "-q"]);
+    stdout(&["extract", cube, "-o", &p("run"), "-q", "--work-dir", &p("scratch")]);
+    for working in ["tiles", "stats", "resid", "edges"] {
+        assert!(d.path().join("scratch").join(working).is_dir() && !d.path().join("run").join(working).exists(), "{working}");
+    }
+    let curves = |run: &str| std::fs::read(d.path().join(run).join("curves.obj")).unwrap();
+    assert_eq!(curves("run"), curves("plain"));
+    // Resumed without the flag (other output filters: the outputs are written again from the
+    // working data).
+    stdout(&["extract", cube, "-o", &p("run"), "-q", "--min-confidence", "0.99"]);
+    assert_ne!(curves("run"), curves("plain"));
+    let (code, err) = run(&["extract", cube, "-o", &p("run"), "-q", "--work-dir", &p("other")]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("keeps its working data in") && err.contains("scratch"), "{err}");
+    assert!(!d.path().join("other").exists(), "a refused work directory was created");
+    let (code, err) = run(&["extract", cube, "-o", &p("run2"), "-q", "--work-dir", &p("scratch")]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("holds the working data of the run in"), "{err}");
+    // --clean, on a finished run with a work directory and on one without.
+    stdout(&["extract", cube, "-o", &p("run"), "-q", "--clean"]);
+    assert!(!d.path().join("scratch").exists());
+    let before = curves("plain");
+    stdout(&["extract", cube, "-o", &p("plain"), "-q", "--clean"]);
+    assert_eq!(curves("plain"), before);
+    for working in ["tiles", "stats", "resid", "edges"] {
+        assert!(!d.path().join("plain").join(working).exists(), "{working}");
+    }
+    assert!(stdout(&["status", &p("plain")]).contains("finished (working data removed)"));
+    let (code, err) = run(&["extract", cube, "-o", &p("plain"), "-q"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("working data was removed (--clean)") && err.contains("--force"), "{err}");
+    stdout(&["view", &p("plain")]);
+    stdout(&["extract", cube, "-o", &p("plain"), "-q", "--force"]);
+    assert!(d.path().join("plain/tiles").is_dir());
+}

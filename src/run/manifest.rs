@@ -66,6 +66,13 @@ pub struct Manifest {
     pub resolved: Option<Resolved>,
     /// Outputs written.
     pub finished: bool,
+    /// Where the working data (tiles and per-tile results) is, if not in the run directory
+    /// (`--work-dir`; absolute).
+    #[serde(default)]
+    pub work_dir: Option<PathBuf>,
+    /// The working data was removed once the outputs were written (`--clean`).
+    #[serde(default)]
+    pub cleaned: bool,
 }
 
 /// The stamp of input file `path`: size, modification time, hash of the first 64 KiB.

@@ -77,6 +77,12 @@ pub struct RunOptions {
     pub recursive: bool,
     /// The curve files written (an output setting).
     pub formats: Vec<Format>,
+    /// Where the working data (the tile store and the per-tile results, most of a run's disk
+    /// use) goes, if not in the run directory; a resumed run keeps the one it started with.
+    pub work_dir: Option<PathBuf>,
+    /// Removes the working data once the outputs are written: the run can then no longer be
+    /// resumed, re-filtered or viewed over its points, only run again with `force`.
+    pub clean: bool,
 }
 
 impl Default for RunOptions {
@@ -95,6 +101,8 @@ impl Default for RunOptions {
             assign_crs: None,
             recursive: false,
             formats: Format::DEFAULT.to_vec(),
+            work_dir: None,
+            clean: false,
         }
     }
 }
@@ -204,7 +212,9 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     // (An input directory that is also the run directory holds the run's own curves.ply: a
     // second run would read it as points.)
     let run_dir = dir.canonicalize().ok();
-    let in_run_dir = |f: &Path| run_dir.as_deref().is_some_and(|r| f.canonicalize().is_ok_and(|c| is_run_file(r, &c)));
+    // (Nor may a work directory's tile store, `.pts` files, be read as text clouds.)
+    let in_work_dir = |c: &Path| c.ancestors().skip(1).any(|a| a.join(WORK_OWNER).is_file());
+    let in_run_dir = |f: &Path| f.canonicalize().is_ok_and(|c| run_dir.as_deref().is_some_and(|r| is_run_file(r, &c)) || in_work_dir(&c));
     let expanded = io::expand_inputs(inputs, opts.recursive)?;
     let mut warnings = Warnings::new(opts.warn);
     warnings.extend(expanded.warnings(in_run_dir));
@@ -267,7 +277,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         }
         Ok((b, declared))
     };
-    let (manifest, resumed) = plan(&ws, job, bounds, opts)?;
+    let (manifest, resumed) = plan(&mut ws, job, bounds, opts)?;
     let mut run = Run::new(ws, manifest, opts);
     let r = run.tile_passes(&Input::Files(&files, filter), params, &first)?;
     for h in &headers {
@@ -280,6 +290,9 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     report.warnings = warnings.into_list();
     report.crs = crs;
     run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
+    if opts.clean {
+        run.clean()?;
+    }
     Ok(report)
 }
 
@@ -372,8 +385,10 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
         }
         Ok((b, points.len() as u64))
     };
-    let ws = Workspace::memory();
-    let (manifest, _) = plan(&ws, job, bounds, opts)?;
+    let mut ws = Workspace::memory();
+    // (In memory there is no working data to put elsewhere or remove.)
+    let opts = &RunOptions { work_dir: None, clean: false, ..opts.clone() };
+    let (manifest, _) = plan(&mut ws, job, bounds, opts)?;
     let mut run = Run::new(ws, manifest, opts);
     let r = run.tile_passes(&Input::Points(points), params, &here)?;
     let (curves, counts, seconds) = run.curves(&r)?;
@@ -384,11 +399,35 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
 /// `bounds()`, sized from the budget); a different job is refused, and `--force` always starts
 /// over. Returns the
 /// manifest and whether the run resumes.
-fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions) -> Result<(Manifest, bool)> {
-    // (With --force, whatever the directory holds, damaged or not, is replaced.)
-    let held = if opts.force { None } else { manifest::read(ws)? };
+fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions) -> Result<(Manifest, bool)> {
+    // (With --force, whatever the directory holds, damaged or not, is replaced; so is the
+    // working data of the run it held, wherever that was.)
+    let held = if opts.force {
+        if let Some(old) = manifest::read(ws).ok().flatten() {
+            use_work_dir(ws, &old)?;
+            remove_working_data(ws);
+        }
+        None
+    } else {
+        manifest::read(ws)?
+    };
     match held {
         Some(m) if m.job == job => {
+            if m.cleaned {
+                return Err(Error::Usage(format!(
+                    "{}: this run finished and its working data was removed (--clean), so it cannot write its outputs again; they are in the directory as they were; use --force to run it again",
+                    ws.root().display()
+                )));
+            }
+            let same = |w: &Path| m.work_dir.as_deref().is_some_and(|held| w.canonicalize().is_ok_and(|w| w == held));
+            if opts.work_dir.as_deref().is_some_and(|w| !same(w)) {
+                let was = m.work_dir.as_ref().map_or("the run directory".to_string(), |w| w.display().to_string());
+                return Err(Error::Usage(format!(
+                    "{}: this run keeps its working data in {was}: resume it with that --work-dir (or none), or use --force to start over",
+                    ws.root().display()
+                )));
+            }
+            use_work_dir(ws, &m)?;
             // (An edited or damaged manifest must not size what the run allocates.)
             let g = &m.grid;
             let sane = g.tiles() <= crate::tiles::MAX_TILES && g.size > 0.0 && g.size.is_finite() && (!m.bucketed || m.tile_points.len() as u64 == g.tiles());
@@ -406,8 +445,17 @@ fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>
         }
         _ => {}
     }
-    for name in [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, VIEW].into_iter().chain(OUTPUTS) {
+    let work_dir = match &opts.work_dir {
+        Some(w) => Some(claim_work_dir(w, ws.root())?),
+        None => None,
+    };
+    remove_working_data(ws);
+    for name in [VIEW].into_iter().chain(OUTPUTS) {
         ws.remove(name);
+    }
+    if let Some(w) = &work_dir {
+        ws.set_work_dir(w, &WORKING)?;
+        remove_working_data(ws);
     }
     let (b, declared) = bounds()?;
     let size = opts.tile_size.unwrap_or_else(|| tile_size_for(&b, declared, opts.memory));
@@ -421,9 +469,66 @@ fn plan(ws: &Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>
             crate::tiles::MAX_TILES
         )));
     }
-    let m = Manifest { job, grid, declared_points: declared, diag: b.diagonal(), bucketed: false, tile_points: vec![], resolved: None, finished: false };
+    let m = Manifest {
+        job,
+        grid,
+        declared_points: declared,
+        diag: b.diagonal(),
+        bucketed: false,
+        tile_points: vec![],
+        resolved: None,
+        finished: false,
+        work_dir,
+        cleaned: false,
+    };
     manifest::save(ws, &m)?;
     Ok((m, false))
+}
+
+/// The top-level names of a run's working data: the tile store and the per-tile results.
+const WORKING: [&str; 4] = [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR];
+
+/// Name of the file by which a work directory names the run directory it belongs to.
+const WORK_OWNER: &str = "crease-run";
+
+/// Points `ws` at the working data of the run `m` describes.
+pub(crate) fn use_work_dir(ws: &mut Workspace, m: &Manifest) -> Result<()> {
+    match &m.work_dir {
+        Some(w) => ws.set_work_dir(w, &WORKING),
+        None => Ok(()),
+    }
+}
+
+/// Removes a run's working data, wherever `ws` has it.
+fn remove_working_data(ws: &Workspace) {
+    for name in WORKING {
+        ws.remove(name);
+    }
+}
+
+/// Makes `dir` the work directory of the run in `run_dir`, returning it absolute: created if
+/// need be, and refused if it is the run directory or holds another run's working data (two
+/// runs there would overwrite each other's tiles).
+fn claim_work_dir(dir: &Path, run_dir: &Path) -> Result<PathBuf> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    let (work, run) = (dir.canonicalize().map_err(|e| Error::output(dir, e))?, run_dir.canonicalize().map_err(|e| Error::output(run_dir, e))?);
+    if work == run {
+        return Err(Error::Usage(format!("--work-dir {}: that is the run directory; leave --work-dir out to keep the working data there", dir.display())));
+    }
+    let owner = work.join(WORK_OWNER);
+    let mine = format!("{}\n", run.display());
+    match std::fs::read_to_string(&owner) {
+        Ok(held) if held != mine => {
+            return Err(Error::Usage(format!(
+                "--work-dir {}: holds the working data of the run in {}; give each run its own work directory",
+                dir.display(),
+                held.trim()
+            )))
+        }
+        Ok(_) => {}
+        Err(_) => crate::workspace::write_atomic(&owner, mine.as_bytes())?,
+    }
+    Ok(work)
 }
 
 /// A run in progress: its workspace, manifest and options, and what the steps found so far.
@@ -721,6 +826,18 @@ impl<'a> Run<'a> {
         Ok(out)
     }
 
+    /// Removes the working data of a finished run (`--clean`), then marks it so in the
+    /// manifest.
+    fn clean(&mut self) -> Result<()> {
+        remove_working_data(&self.ws);
+        if let Some(w) = &self.manifest.work_dir {
+            let _ = std::fs::remove_file(w.join(WORK_OWNER));
+            let _ = std::fs::remove_dir(w);
+        }
+        self.manifest.cleaned = true;
+        manifest::save(&self.ws, &self.manifest)
+    }
+
     /// The write step: the outputs, then the manifest marked finished.
     fn write(&mut self, curves: &[Polyline], crs: &Crs) -> Result<()> {
         let t = Instant::now();
@@ -792,13 +909,15 @@ fn sample_tiles(ws: &Workspace, manifest: &Manifest, tiles: &[u32], points: f64)
 /// # Ok::<(), crease::Error>(())
 /// ```
 pub fn write_view(dir: &Path) -> Result<PathBuf> {
-    let ws = Workspace::disk(dir)?;
+    let mut ws = Workspace::disk(dir)?;
     let m = manifest::read(&ws)?.ok_or_else(|| Error::input(dir, "not a crease run directory (no manifest.json)"))?;
     if !m.finished {
         return Err(Error::input(dir, "the run has not finished: run crease extract on it first"));
     }
+    use_work_dir(&mut ws, &m)?;
     let tiles: Vec<u32> = (0..m.tile_points.len() as u32).filter(|&t| m.tile_points[t as usize] > 0).collect();
-    let points = sample_tiles(&ws, &m, &tiles, crate::view::VIEW_POINTS)?;
+    // (A run whose working data was removed has its curves left, not its points.)
+    let points = if m.cleaned { vec![] } else { sample_tiles(&ws, &m, &tiles, crate::view::VIEW_POINTS)? };
     let curves = crate::curves::read_ply(&dir.join("curves.ply"))?;
     let crs = std::fs::read(dir.join("report.json"))
         .ok()

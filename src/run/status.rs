@@ -22,6 +22,10 @@ pub struct Status {
     pub passes: Vec<(String, usize)>,
     /// Outputs written.
     pub finished: bool,
+    /// Where the working data is, if not in the run directory.
+    pub work_dir: Option<PathBuf>,
+    /// The working data was removed once the outputs were written.
+    pub cleaned: bool,
     /// One-line summary.
     pub summary: String,
 }
@@ -37,13 +41,16 @@ pub fn status(dir: &Path) -> Result<Status> {
     if !dir.is_dir() {
         return Err(Error::input(dir, "not a crease run directory (no such directory)"));
     }
-    let ws = Workspace::disk(dir)?;
+    let mut ws = Workspace::disk(dir)?;
     let m = manifest::read(&ws)?.ok_or_else(|| Error::input(dir, "not a crease run directory (no manifest.json)"))?;
+    super::use_work_dir(&mut ws, &m)?;
     let tiles: Vec<u32> = (0..m.tile_points.len() as u32).filter(|&t| m.tile_points[t as usize] > 0).collect();
     let done = |dir: &str| tiles.iter().filter(|&&t| ws.exists(&super::records::name(dir, t))).count();
     let passes: Vec<(String, usize)> =
         [("statistics", Stats::DIR), ("residuals", Residuals::DIR), ("projection", Edges::DIR)].iter().map(|(n, d)| (n.to_string(), done(d))).collect();
-    let summary = if m.finished {
+    let summary = if m.finished && m.cleaned {
+        "finished (working data removed)".to_string()
+    } else if m.finished {
         "finished".to_string()
     } else if !m.bucketed {
         "bucketing not finished (it restarts from the beginning)".to_string()
@@ -60,6 +67,8 @@ pub fn status(dir: &Path) -> Result<Status> {
         bucketed: m.bucketed,
         passes,
         finished: m.finished,
+        work_dir: m.work_dir.clone(),
+        cleaned: m.cleaned,
         summary,
     })
 }
@@ -74,9 +83,12 @@ pub fn render_status(s: &Status) -> String {
         s.tiles,
         if s.bucketed { "yes" } else { "no" }
     );
-    for (name, n) in &s.passes {
+    for (name, n) in s.passes.iter().filter(|_| !s.cleaned) {
         out += &format!("  {name:<10} {n}/{}\n", s.tiles);
     }
     out += &format!("  outputs    {}\n", if s.finished { "written" } else { "not yet" });
+    if let Some(w) = s.work_dir.as_ref().filter(|_| !s.cleaned) {
+        out += &format!("  work dir   {}\n", w.display());
+    }
     out
 }
