@@ -422,6 +422,13 @@ struct ExtractArgs {
     /// the one it started with.
     #[arg(long, value_name = "DIR")]
     work_dir: Option<PathBuf>,
+    /// Do the share of worker I of N processes working on the run side by side (on one
+    /// machine, or over a cluster's shared file system, as a job array:
+    /// `--worker $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT`): the tiles whose number modulo
+    /// N is I, pass after pass, as far as the other workers' shares allow; worker 0 also plans,
+    /// buckets and writes the outputs. Run again, a worker goes on where it stopped.
+    #[arg(long, value_name = "I/N")]
+    worker: Option<crease::run::Worker>,
     /// Remove the working data once the outputs are written. The run then cannot be resumed,
     /// given other output filters, or viewed over its points (`crease view` draws the curves
     /// alone).
@@ -464,6 +471,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         force,
         per_file,
         work_dir,
+        worker,
         clean,
         quiet,
         debug_dir,
@@ -528,7 +536,26 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
     let mut summaries = vec![];
     for (inputs, dir, work_dir) in jobs {
         let opts = crease::run::RunOptions { work_dir, ..opts.clone() };
-        let r = crease::run::run_extract(&inputs, &dir, &params, &filter.filter()?, &opts)?;
+        let r = match worker {
+            None => crease::run::run_extract(&inputs, &dir, &params, &filter.filter()?, &opts)?,
+            Some(w) => match crease::run::run_worker(&inputs, &dir, &params, &filter.filter()?, &opts, w)? {
+                crease::run::WorkerStep::Finished(r) => *r,
+                crease::run::WorkerStep::Waiting(what) => {
+                    if !quiet {
+                        eprintln!(
+                            "worker {}/{}: its share is done as far as it goes; waiting for {what}: run it again to go on ({})",
+                            w.index,
+                            w.count,
+                            dir.display()
+                        );
+                    }
+                    if json {
+                        summaries.push(serde_json::json!({"dir": dir, "worker": format!("{}/{}", w.index, w.count), "waiting": what}));
+                    }
+                    continue;
+                }
+            },
+        };
         if json {
             let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).filter(|f| f.is_file()).collect();
             summaries.push(serde_json::json!({"dir": dir, "outputs": outputs, "report": r}));

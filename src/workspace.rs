@@ -17,6 +17,8 @@ pub struct Workspace {
     memory: Option<Mutex<HashMap<String, Arc<Vec<u8>>>>>,
     /// The run directory's lock file, locked, once [`Workspace::lock`] took it.
     lock: Option<std::fs::File>,
+    /// A worker's own lock file (`lock.<i>`), locked, once [`Workspace::lock`] took it.
+    worker_lock: Option<std::fs::File>,
     /// Where the working files live when not in the run directory (see
     /// [`Workspace::set_work_dir`]): that directory, and the top-level names that go there.
     work: Option<(PathBuf, &'static [&'static str])>,
@@ -29,39 +31,65 @@ impl Workspace {
     /// The run directory `dir` (created if needed).
     pub fn disk(dir: &Path) -> Result<Workspace> {
         std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
-        Ok(Workspace { root: dir.to_path_buf(), memory: None, lock: None, work: None })
+        Ok(Workspace { root: dir.to_path_buf(), memory: None, lock: None, worker_lock: None, work: None })
     }
 
     /// A workspace that keeps its files in memory.
     pub fn memory() -> Workspace {
-        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())), lock: None, work: None }
+        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())), lock: None, worker_lock: None, work: None }
     }
 
     /// Takes the run directory for this process until the workspace is dropped: an advisory
     /// lock on its lock file, which then holds this process's id. A directory another process
     /// holds is refused, naming that process.
-    pub fn lock(&mut self) -> Result<()> {
+    ///
+    /// Worker `i` of a run shared by several (`Some(i)`) shares the lock file with the other
+    /// workers and takes `lock.<i>` alone: workers run side by side, each index once, and a
+    /// lone run neither joins them nor lets them in.
+    pub fn lock(&mut self, worker: Option<u32>) -> Result<()> {
         if self.memory.is_some() || self.lock.is_some() {
             return Ok(());
         }
         use std::io::{Seek, Write};
-        let p = self.path(LOCK);
-        let mut f = std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(false).open(&p).map_err(|e| Error::output(&p, e))?;
-        match f.try_lock() {
+        let open = |name: &str| {
+            let p = self.path(name);
+            std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(false).open(&p).map_err(|e| Error::output(&p, e))
+        };
+        let refused = |f: &mut std::fs::File, what: &str| {
+            let mut holder = String::new();
+            let _ = f.read_to_string(&mut holder);
+            // (The file names the last lone run or worker to take it; if that process is gone,
+            // the holders are workers, which do not write it.)
+            let pid = holder.trim().parse::<u32>().ok().filter(|pid| Path::new(&format!("/proc/{pid}")).exists() || !Path::new("/proc/self").exists());
+            let who = pid.map_or("crease workers".to_string(), |pid| format!("process {pid}"));
+            Error::Usage(format!("{}: in use by {what} ({who}); wait for it to end, or stop it, before running here", self.root.display()))
+        };
+        let mut f = open(LOCK)?;
+        let taken = match worker {
+            None => f.try_lock(),
+            Some(_) => f.try_lock_shared(),
+        };
+        match taken {
             Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => {
-                let mut holder = String::new();
-                let _ = f.read_to_string(&mut holder);
-                let who = holder.trim().parse::<u32>().map_or("another process".to_string(), |pid| format!("process {pid}"));
-                return Err(Error::Usage(format!(
-                    "{}: in use by another crease run ({who}); wait for it to end, or stop it, before running here",
-                    self.root.display()
-                )));
-            }
-            Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(&p, e)),
+            Err(std::fs::TryLockError::WouldBlock) => return Err(refused(&mut f, "another crease run")),
+            Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(self.path(LOCK), e)),
         }
-        let r = f.set_len(0).and_then(|_| f.rewind()).and_then(|_| writeln!(f, "{}", std::process::id()));
-        r.map_err(|e| Error::output(&p, e))?;
+        let mut own = match worker {
+            None => f.try_clone().map_err(|e| Error::output(self.path(LOCK), e))?,
+            Some(i) => {
+                let name = format!("{LOCK}.{i}");
+                let mut w = open(&name)?;
+                match w.try_lock() {
+                    Ok(()) => {}
+                    Err(std::fs::TryLockError::WouldBlock) => return Err(refused(&mut w, &format!("worker {i}"))),
+                    Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(self.path(&name), e)),
+                }
+                self.worker_lock = Some(w.try_clone().map_err(|e| Error::output(self.path(&name), e))?);
+                w
+            }
+        };
+        let r = own.set_len(0).and_then(|_| own.rewind()).and_then(|_| writeln!(own, "{}", std::process::id()));
+        r.map_err(|e| Error::output(self.path(LOCK), e))?;
         self.lock = Some(f);
         Ok(())
     }

@@ -9,7 +9,11 @@
 //!   version), the plan (grid), and what is done;
 //! - `tiles/`: bucketed points; `stats/`, `resid/`, `edges/`: one result file per tile and pass,
 //!   each a record of the codec (see `codec.rs`);
-//! - `curves.obj`, `curves.ply`, `curves.geojson`, `report.json`: the outputs.
+//! - `curves.obj`, `curves.ply`, `curves.geojson`, `report.json`: the outputs;
+//! - `lock`, and `lock.<i>` for worker `i` of several sharing the run ([`run_worker`]).
+//!
+//! With `--work-dir`, the working data (`tiles/` and the per-tile results) is in that
+//! directory instead, which names its run in `crease-run`.
 //!
 //! Every file is written to a temporary name, synced and renamed, and only then counted as
 //! done, so a run killed at any moment resumes where it stopped and ends with the same curves.
@@ -83,6 +87,48 @@ pub struct RunOptions {
     /// Removes the working data once the outputs are written: the run can then no longer be
     /// resumed, re-filtered or viewed over its points, only run again with `force`.
     pub clean: bool,
+}
+
+/// One of `count` processes sharing a run: worker `index` does the tiles whose number modulo
+/// `count` is `index`; worker 0 also plans, buckets, and writes the outputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Worker {
+    /// This worker's index, below `count`.
+    pub index: u32,
+    /// Number of workers.
+    pub count: u32,
+}
+
+impl Worker {
+    /// True for the worker that plans, buckets and writes: worker 0, or a lone run.
+    fn leads(w: Option<Worker>) -> bool {
+        w.is_none_or(|w| w.index == 0)
+    }
+}
+
+impl std::str::FromStr for Worker {
+    type Err = String;
+
+    /// `I/N`, as `--worker` takes it (`$SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT`, say).
+    fn from_str(s: &str) -> std::result::Result<Worker, String> {
+        let bad = || format!("{s}: a worker is I/N, its index I (from 0) of N workers");
+        let (i, n) = s.split_once('/').ok_or_else(bad)?;
+        let (index, count) = (i.trim().parse::<u32>().map_err(|_| bad())?, n.trim().parse::<u32>().map_err(|_| bad())?);
+        if index >= count {
+            return Err(format!("{s}: worker index {index} is not below the number of workers {count}"));
+        }
+        Ok(Worker { index, count })
+    }
+}
+
+/// What one invocation of a worker got done (see [`run_worker`]).
+#[derive(Clone, Debug)]
+pub enum WorkerStep {
+    /// The run finished here: its outputs are written.
+    Finished(Box<Report>),
+    /// This worker's share is done as far as it can go; what it waits for, for example
+    /// "residuals: 5 of 8 tiles done (the other workers' share)".
+    Waiting(String),
 }
 
 impl Default for RunOptions {
@@ -208,6 +254,37 @@ pub struct Extraction {
 /// # Ok::<(), crease::Error>(())
 /// ```
 pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts: &RunOptions) -> Result<Report> {
+    match run_in(inputs, dir, params, filter, opts, None)? {
+        WorkerStep::Finished(report) => Ok(*report),
+        // (A lone run does every tile itself: it has nothing to wait for.)
+        WorkerStep::Waiting(what) => Err(Error::Usage(format!("{}: {what}", dir.display()))),
+    }
+}
+
+/// [`run_extract`] as one of several processes sharing the run directory `dir` (on one
+/// machine, or on a cluster's shared file system): `worker` does its share of each pass, and
+/// goes on to the next pass once every worker's share of this one is done; worker 0 also
+/// plans the run, buckets the points and, once all passes are done, writes the outputs. Each
+/// invocation does what it can and returns: the outputs' report if it wrote them, otherwise
+/// what it waits for; invoked again, a worker picks up where it stopped (a killed worker's
+/// tiles are done by its next invocation). The curves are the same bytes as those of
+/// [`run_extract`] on the same input.
+///
+/// ```no_run
+/// use crease::run::{run_worker, RunOptions, Worker, WorkerStep};
+/// let (inputs, dir) = (vec!["scan.laz".into()], std::path::Path::new("run"));
+/// let me: Worker = "1/3".parse().unwrap();
+/// match run_worker(&inputs, dir, &Default::default(), &Default::default(), &RunOptions::default(), me)? {
+///     WorkerStep::Finished(report) => println!("{} curves", report.counts.curves),
+///     WorkerStep::Waiting(what) => println!("waiting for {what}"),
+/// }
+/// # Ok::<(), crease::Error>(())
+/// ```
+pub fn run_worker(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts: &RunOptions, worker: Worker) -> Result<WorkerStep> {
+    run_in(inputs, dir, params, filter, opts, Some(worker))
+}
+
+fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts: &RunOptions, worker: Option<Worker>) -> Result<WorkerStep> {
     let t0 = Instant::now();
     // (An input directory that is also the run directory holds the run's own curves.ply: a
     // second run would read it as points.)
@@ -255,7 +332,15 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         memory: opts.memory,
     };
     let mut ws = Workspace::disk(dir)?;
-    ws.lock()?;
+    ws.lock(worker.map(|w| w.index))?;
+    if !Worker::leads(worker) {
+        if opts.force {
+            return Err(Error::Usage("--force starts a run over: give it to worker 0 (or a lone run), not to the others".into()));
+        }
+        if manifest::read(&ws)?.is_none() {
+            return Ok(WorkerStep::Waiting("the run to be planned (worker 0 plans it and buckets the points)".into()));
+        }
+    }
     let bounds = || -> Result<(Bounds, u64)> {
         let mut b = Bounds::EMPTY;
         let mut declared = 0;
@@ -278,8 +363,13 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         Ok((b, declared))
     };
     let (manifest, resumed) = plan(&mut ws, job, bounds, opts)?;
-    let mut run = Run::new(ws, manifest, opts);
-    let r = run.tile_passes(&Input::Files(&files, filter), params, &first)?;
+    let mut run = Run::new(ws, manifest, opts, worker);
+    let Some(r) = run.tile_passes(&Input::Files(&files, filter), params, &first)? else {
+        return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
+    };
+    if !Worker::leads(worker) {
+        return Ok(WorkerStep::Waiting("the curves and outputs (worker 0 writes them)".into()));
+    }
     for h in &headers {
         warnings.extend(coarse_coordinates(h, &run.manifest.grid, r.kappa));
     }
@@ -293,7 +383,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
     if opts.clean {
         run.clean()?;
     }
-    Ok(report)
+    Ok(WorkerStep::Finished(Box::new(report)))
 }
 
 /// Warnings of a run: each is passed to the run's handler as it is found, and listed in the
@@ -389,8 +479,8 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
     // (In memory there is no working data to put elsewhere or remove.)
     let opts = &RunOptions { work_dir: None, clean: false, ..opts.clone() };
     let (manifest, _) = plan(&mut ws, job, bounds, opts)?;
-    let mut run = Run::new(ws, manifest, opts);
-    let r = run.tile_passes(&Input::Points(points), params, &here)?;
+    let mut run = Run::new(ws, manifest, opts, None);
+    let r = run.tile_passes(&Input::Points(points), params, &here)?.expect("a lone run does every tile");
     let (curves, counts, seconds) = run.curves(&r)?;
     Ok(Extraction { curves, params: r, tau: run.tau, counts, seconds })
 }
@@ -550,13 +640,41 @@ struct Run<'a> {
     peak_rss_tiles: u64,
     /// Damaged results removed to be computed again.
     repaired: Vec<PathBuf>,
+    /// This process's share of a run that several share.
+    worker: Option<Worker>,
+    /// What a worker stopped for (see [`WorkerStep::Waiting`]).
+    waiting: Option<String>,
 }
 
 impl<'a> Run<'a> {
-    fn new(ws: Workspace, manifest: Manifest, opts: &'a RunOptions) -> Run<'a> {
+    fn new(ws: Workspace, manifest: Manifest, opts: &'a RunOptions, worker: Option<Worker>) -> Run<'a> {
         let kq = key_quantum(manifest.diag);
         let progress = Progress::new(opts.progress);
-        Run { ws, manifest, opts, progress, pass: PassSeconds::default(), tiles: vec![], kq, tau: 0.0, evaluated: 0, peak_rss_tiles: 0, repaired: vec![] }
+        let pass = PassSeconds::default();
+        Run { ws, manifest, opts, progress, pass, tiles: vec![], kq, tau: 0.0, evaluated: 0, peak_rss_tiles: 0, repaired: vec![], worker, waiting: None }
+    }
+
+    /// The tiles this process computes in a pass: all of them, or a worker's share.
+    fn share(&self) -> Vec<u32> {
+        self.tiles.iter().copied().filter(|&t| self.worker.is_none_or(|w| t % w.count == w.index)).collect()
+    }
+
+    /// True if every tile has its result of pass `R`; otherwise notes what a worker waits for.
+    fn all_done<R: Record>(&mut self, pass: &str) -> bool {
+        let done = self.tiles.iter().filter(|&&t| self.ws.exists(&records::name(R::DIR, t))).count();
+        if done < self.tiles.len() {
+            self.waiting = Some(format!("{pass}: {done} of {} tiles done (the other workers' share)", self.tiles.len()));
+        }
+        done == self.tiles.len()
+    }
+
+    /// Saves the manifest, if this process is the one that writes it (worker 0, or a lone
+    /// run): workers side by side must not replace it under each other.
+    fn save_manifest(&self) -> Result<()> {
+        if Worker::leads(self.worker) {
+            manifest::save(&self.ws, &self.manifest)?;
+        }
+        Ok(())
     }
 
     /// Checks the stored results of pass `R` (an earlier invocation's), and removes those that
@@ -586,22 +704,29 @@ impl<'a> Run<'a> {
 
     /// Bucketing, statistics, residuals and projection: the steps that run tile by tile.
     /// Returns the resolved parameters; tau is kept.
-    fn tile_passes(&mut self, input: &Input, params: &Params, first_input: &Path) -> Result<Resolved> {
+    fn tile_passes(&mut self, input: &Input, params: &Params, first_input: &Path) -> Result<Option<Resolved>> {
+        if !self.manifest.bucketed && !Worker::leads(self.worker) {
+            self.waiting = Some("bucketing (worker 0 buckets the points)".into());
+            return Ok(None);
+        }
         self.bucket(input)?;
         let total: u64 = self.manifest.tile_points.iter().sum();
         if total < 10 {
             return Err(Error::input(first_input, format!("only {total} points after filtering: nothing to extract")));
         }
         self.tiles = (0..self.manifest.grid.len() as u32).filter(|&t| self.manifest.tile_points[t as usize] > 0).collect();
-        let r = self.statistics(params)?;
+        let Some(r) = self.statistics(params)? else { return Ok(None) };
         // (All points at one position, or too few apart: every length of the method is zero.)
         if !(r.kappa > 0.0 && r.kappa.is_finite() && r.fit_radius > 0.0 && r.rmls_radius > 0.0) {
             return Err(Error::input(first_input, format!("the points have no spread (spacing {}): nothing to extract", r.kappa)));
         }
-        self.tau = self.residuals(&r, params)?;
-        self.projection(&r)?;
+        let Some(tau) = self.residuals(&r, params)? else { return Ok(None) };
+        self.tau = tau;
+        if !self.projection(&r)? {
+            return Ok(None);
+        }
         self.peak_rss_tiles = crate::mem::peak_rss();
-        Ok(r)
+        Ok(Some(r))
     }
 
     /// Bucketing: all or nothing (a partial store is discarded on resume).
@@ -628,11 +753,11 @@ impl<'a> Run<'a> {
     /// Statistics pass: spacing, noise and density at sampled points, with a halo wide enough
     /// for the 16-kappa noise fit (kappa from a probe of the fullest tile); then the
     /// parameters are resolved from them.
-    fn statistics(&mut self, params: &Params) -> Result<Resolved> {
+    fn statistics(&mut self, params: &Params) -> Result<Option<Resolved>> {
         let t = Instant::now();
         if let Some(r) = &self.manifest.resolved {
             self.pass.statistics = t.elapsed().as_secs_f64();
-            return Ok(r.clone());
+            return Ok(Some(r.clone()));
         }
         self.repair::<Stats>()?;
         let (store, grid) = (Store::new(&self.ws)?, &self.manifest.grid);
@@ -651,7 +776,7 @@ impl<'a> Run<'a> {
         let time = tile_pass(
             &self.context(),
             "statistics",
-            &self.tiles,
+            &self.share(),
             |t, _| pass::load(store, grid, t, &loading(halo0)),
             |t, first| {
                 let tile = StatsTile { core: grid.core(t), halo: halo0, key_quantum: self.kq, total, seed };
@@ -659,15 +784,18 @@ impl<'a> Run<'a> {
             },
         )?;
         self.pass.statistics_load = time.load;
+        if !self.all_done::<Stats>("statistics") {
+            return Ok(None);
+        }
         let mut stats = vec![];
         for &t in &self.tiles {
             stats.extend(records::read::<Stats>(&self.ws, t)?.0);
         }
         let r = crate::extract::params::resolve(params, &stats);
         self.manifest.resolved = Some(r.clone());
-        manifest::save(&self.ws, &self.manifest)?;
+        self.save_manifest()?;
         self.pass.statistics = t.elapsed().as_secs_f64();
-        Ok(r)
+        Ok(Some(r))
     }
 
     /// How the residual and projection passes load a tile: the same way in both, so that the
@@ -678,18 +806,21 @@ impl<'a> Run<'a> {
 
     /// Residual pass (stage 1); returns tau, the mean residual over all points (an exact sum:
     /// the same whatever the tiling), unless the user gave it.
-    fn residuals(&mut self, r: &Resolved, params: &Params) -> Result<f64> {
+    fn residuals(&mut self, r: &Resolved, params: &Params) -> Result<Option<f64>> {
         let t = Instant::now();
         self.repair::<Residuals>()?;
         let (store, grid, loading) = (Store::new(&self.ws)?, &self.manifest.grid, self.cloud_loading(r));
         let time = tile_pass(
             &self.context(),
             "residuals",
-            &self.tiles,
+            &self.share(),
             |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle, &self.opts.cancel),
             |_, (cloud, core)| Ok(Residuals(candidates::tile_residuals(&cloud, &core, r))),
         )?;
         self.pass.residuals_load = time.load;
+        if !self.all_done::<Residuals>("residuals") {
+            return Ok(None);
+        }
         // (Read on the pool, which is idle here.)
         let sums: Vec<ResidualSum> = self
             .tiles
@@ -699,11 +830,12 @@ impl<'a> Run<'a> {
         let total = sums.into_iter().fold(ResidualSum::default(), |a, b| a + b);
         self.evaluated = total.count();
         self.pass.residuals = t.elapsed().as_secs_f64();
-        Ok(params.tau.unwrap_or(settle(total.mean())))
+        Ok(Some(params.tau.unwrap_or(settle(total.mean()))))
     }
 
-    /// Projection pass (stage 2): the candidates of each tile, projected.
-    fn projection(&mut self, r: &Resolved) -> Result<()> {
+    /// Projection pass (stage 2): the candidates of each tile, projected. False if a worker's
+    /// share is done but not every tile is.
+    fn projection(&mut self, r: &Resolved) -> Result<bool> {
         let t = Instant::now();
         self.repair::<Edges>()?;
         let (store, grid, loading, tau) = (Store::new(&self.ws)?, &self.manifest.grid, self.cloud_loading(r), self.tau);
@@ -711,7 +843,7 @@ impl<'a> Run<'a> {
         let time = tile_pass(
             &self.context(),
             "projection",
-            &self.tiles,
+            &self.share(),
             |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle, &self.opts.cancel),
             |t, (cloud, core)| {
                 let res = records::read::<Residuals>(&self.ws, t)?.0;
@@ -725,7 +857,7 @@ impl<'a> Run<'a> {
         )?;
         self.pass.projection_load = time.load;
         self.pass.projection = t.elapsed().as_secs_f64();
-        Ok(())
+        Ok(self.all_done::<Edges>("projection"))
     }
 
     /// A tile's edge points, snapped, with its corners and counts.
@@ -936,8 +1068,10 @@ fn is_run_file(dir: &Path, f: &Path) -> bool {
         return false;
     };
     let top = rel.components().next().map(|c| c.as_os_str().to_string_lossy().into_owned()).unwrap_or_default();
+    // (Workers' locks are `lock.<i>`.)
     [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "out.tmp", manifest::NAME, "lock", VIEW].contains(&top.as_str())
         || OUTPUTS.contains(&top.as_str())
+        || top.strip_prefix("lock.").is_some_and(|i| i.parse::<u32>().is_ok())
 }
 
 /// The files a finished run writes into its directory.

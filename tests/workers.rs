@@ -1,0 +1,83 @@
+//! Several worker processes sharing one run directory (`--worker I/N`, as job arrays on a
+//! cluster run them) write the same curves as one `crease extract`, also when a worker is
+//! killed part way and started again.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+fn crease(args: &[impl AsRef<std::ffi::OsStr>]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_crease")).args(args).output().unwrap()
+}
+
+#[test]
+fn three_workers_write_the_curves_of_one_run_even_when_one_is_killed() {
+    let d = tempfile::tempdir().unwrap();
+    let fandisk = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/fandisk.las");
+    let (input, plain, shared) = (fandisk.to_str().unwrap(), d.path().join("plain"), d.path().join("shared"));
+    // (Tiles of 0.4 units: 47 tiles with points, so that each worker has a share of many.)
+    let common = ["-q", "--tile-size", "0.4"];
+    let out = crease(&[&["extract", input, "-o", plain.to_str().unwrap()][..], &common].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let worker = |i: u32| {
+        let w = format!("{i}/3");
+        let args = [&["extract", input, "-o", shared.to_str().unwrap(), "--worker", &w][..], &common].concat();
+        Command::new(env!("CARGO_BIN_EXE_crease")).args(args).stderr(Stdio::piped()).spawn().unwrap()
+    };
+    // Rounds of the three side by side, until worker 0 has written the outputs; in the second
+    // round, worker 1 is killed soon after it starts.
+    let mut rounds = 0;
+    while !shared.join("curves.obj").exists() {
+        rounds += 1;
+        assert!(rounds <= 8, "not finished after 8 rounds");
+        let mut running: Vec<_> = (0..3).map(worker).collect();
+        if rounds == 2 {
+            std::thread::sleep(std::time::Duration::from_millis(150));
+            running[1].kill().unwrap();
+        }
+        for (i, w) in running.into_iter().enumerate() {
+            let out = w.wait_with_output().unwrap();
+            if !(rounds == 2 && i == 1) {
+                assert!(out.status.success(), "round {rounds}, worker {i}: {}", String::from_utf8_lossy(&out.stderr));
+            }
+        }
+    }
+    assert!(rounds >= 2, "one round did it all: the workers did not share the passes");
+    let curves = |dir: &Path| std::fs::read(dir.join("curves.obj")).unwrap();
+    assert_eq!(curves(&shared), curves(&plain));
+    let status = crease(&["status", shared.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&status.stdout).contains("finished"));
+}
+
+#[test]
+fn workers_and_lone_runs_do_not_mix_and_each_index_runs_once() {
+    let d = tempfile::tempdir().unwrap();
+    let cube = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las");
+    let run = d.path().join("run");
+    let (cube, dir) = (cube.to_str().unwrap().to_string(), run.to_str().unwrap().to_string());
+    let args = |extra: &[&str]| -> Vec<String> { ["extract", &cube, "-o", &dir, "-q"].iter().chain(extra).map(|s| s.to_string()).collect() };
+    let refused = |extra: &[&str], why: &str| {
+        let out = crease(&args(extra));
+        assert_eq!(out.status.code(), Some(2), "{extra:?}");
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(err.contains(why), "{extra:?}: {err}");
+    };
+    refused(&["--worker", "3/3"], "not below the number of workers");
+    refused(&["--worker", "1"], "a worker is I/N");
+    // A worker other than 0 neither plans the run nor forces it.
+    let out = crease(&args(&["--worker", "1/2"]));
+    assert!(out.status.success() && !run.join("manifest.json").exists());
+    refused(&["--worker", "1/2", "--force"], "give it to worker 0");
+    // While a worker holds the run (a shared lock, as this test takes it), a lone run is
+    // refused; while worker 1 runs, another worker 1 is.
+    std::fs::create_dir_all(&run).unwrap();
+    let shared = std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(false).open(run.join("lock")).unwrap();
+    shared.try_lock_shared().unwrap();
+    refused(&[], "in use by another crease run");
+    let one = std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(false).open(run.join("lock.1")).unwrap();
+    one.try_lock().unwrap();
+    refused(&["--worker", "1/2"], "in use by worker 1");
+    // Worker 0 runs beside them.
+    let out = crease(&args(&["--worker", "0/2"]));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(run.join("manifest.json").exists());
+}
