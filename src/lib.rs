@@ -44,6 +44,7 @@ pub mod preview;
 pub mod progress;
 pub mod rng;
 pub mod run;
+pub mod slurm;
 pub mod spacing;
 pub mod spatial;
 pub mod synth;

@@ -126,6 +126,11 @@ enum Cmd {
     },
     /// Extracts feature curves; writes curves.obj, curves.ply, curves.geojson and report.json.
     Extract(ExtractArgs),
+    /// Writes RUN/slurm/: an extraction as a chain of Slurm jobs (plan and bucketing, one
+    /// array job per tile pass, then the curves), each after the one before, over a run
+    /// directory on a file system every node shares; with --submit, submits it. Takes the
+    /// arguments of extract; those after -- become #SBATCH options of every job.
+    Slurm(SlurmArgs),
     /// Tells what a run directory has done and what is left.
     Status {
         /// The run directory.
@@ -365,6 +370,7 @@ fn run(cli: Cli) -> Result<(), Error> {
         }
         Cmd::Man => clap_mangen::Man::new(Cli::command()).render(&mut std::io::stdout()).map_err(|e| Error::output("stdout", e))?,
         Cmd::Extract(args) => extract_cmd(args)?,
+        Cmd::Slurm(args) => slurm_cmd(args)?,
         Cmd::Status { dir, json } => {
             let s = crease::run::status(&dir)?;
             if json {
@@ -454,6 +460,60 @@ struct ExtractArgs {
     /// --min-confidence; no reprojection).
     #[arg(long, value_name = "EPSG:N|WKT", value_parser = parse_crs)]
     a_srs: Option<Box<crease::crs::Crs>>,
+}
+
+#[derive(Args)]
+struct SlurmArgs {
+    /// Number of workers: the tasks of each array job.
+    #[arg(long, default_value_t = 4)]
+    tasks: u32,
+    /// Submit the chain (sbatch must be on the path) and print its job ids.
+    #[arg(long)]
+    submit: bool,
+    #[command(flatten)]
+    extract: ExtractArgs,
+    /// #SBATCH options for every job (after --), e.g. -- --partition=long --time=4:00:00.
+    #[arg(last = true)]
+    sbatch: Vec<String>,
+}
+
+fn slurm_cmd(a: SlurmArgs) -> Result<(), Error> {
+    let e = &a.extract;
+    for (given, flag) in [(e.worker.is_some(), "--worker"), (e.force, "--force"), (e.per_file, "--per-file")] {
+        if given {
+            return Err(Error::Usage(format!(
+                "crease slurm: {flag} is not for a job chain (the chain gives each job its worker; remove or start a run over by hand)"
+            )));
+        }
+    }
+    // (The jobs run extract with the arguments given here, verbatim, but for slurm's own.)
+    let raw: Vec<String> = std::env::args().skip_while(|x| x != "slurm").skip(1).take_while(|x| x != "--").collect();
+    let mut extract_args = vec![];
+    let mut it = raw.into_iter();
+    while let Some(x) = it.next() {
+        match x.as_str() {
+            "--tasks" => {
+                it.next();
+            }
+            "--submit" => {}
+            _ if x.starts_with("--tasks=") => {}
+            _ => extract_args.push(x),
+        }
+    }
+    let exe = std::env::current_exe().and_then(|p| p.canonicalize()).map_err(|err| Error::output("the crease binary", err))?;
+    let workdir = std::env::current_dir().map_err(|err| Error::output(".", err))?;
+    let run = workdir.join(&e.out);
+    let chain = crease::slurm::Chain { exe, workdir, run: run.clone(), extract_args, tasks: a.tasks, sbatch_args: a.sbatch.clone() };
+    let scripts = crease::slurm::write_chain(&chain)?;
+    if a.submit {
+        print!("{}", crease::slurm::submit(&run)?);
+    } else {
+        for s in &scripts {
+            println!("{}", s.display());
+        }
+        eprintln!("submit with: bash {}", run.join("slurm").join("submit.sh").display());
+    }
+    Ok(())
 }
 
 fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {

@@ -81,3 +81,38 @@ fn workers_and_lone_runs_do_not_mix_and_each_index_runs_once() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(run.join("manifest.json").exists());
 }
+
+/// The job chain `crease slurm` writes, run by hand as Slurm would run it (each array job's
+/// tasks with their `SLURM_ARRAY_TASK_ID`, the jobs in order), writes the curves of one run.
+#[test]
+fn the_slurm_chain_run_in_order_writes_the_curves_of_one_run() {
+    let d = tempfile::tempdir().unwrap();
+    let fandisk = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/fandisk.las");
+    let (input, plain, chained) = (fandisk.to_str().unwrap(), d.path().join("plain"), d.path().join("chained"));
+    let common = ["-q", "--tile-size", "0.4"];
+    assert!(crease(&[&["extract", input, "-o", plain.to_str().unwrap()][..], &common].concat()).status.success());
+    let out = crease(&[&["slurm", input, "-o", chained.to_str().unwrap(), "--tasks", "3"][..], &common, &["--", "--time=5:00"]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let scripts: Vec<String> = String::from_utf8_lossy(&out.stdout).lines().map(String::from).collect();
+    assert_eq!(scripts.len(), 5);
+    for s in &scripts {
+        let text = std::fs::read_to_string(s).unwrap();
+        assert!(text.contains("#SBATCH --time=5:00") && !text.contains("--tasks"), "{text}");
+        let tasks: Vec<Option<u32>> = if text.contains("#SBATCH --array=0-2") { (0..3).map(Some).collect() } else { vec![None] };
+        for task in tasks {
+            let mut cmd = Command::new("bash");
+            cmd.arg(s);
+            if let Some(i) = task {
+                cmd.env("SLURM_ARRAY_TASK_ID", i.to_string());
+            }
+            let out = cmd.output().unwrap();
+            assert!(out.status.success(), "{s} task {task:?}: {}", String::from_utf8_lossy(&out.stderr));
+        }
+    }
+    assert_eq!(std::fs::read(chained.join("curves.obj")).unwrap(), std::fs::read(plain.join("curves.obj")).unwrap());
+    let submit = std::fs::read_to_string(chained.join("slurm/submit.sh")).unwrap();
+    assert_eq!(submit.matches("--dependency=afterok:$prev").count(), 5);
+    // Flags that would break a chain are refused.
+    let out = crease(&["slurm", input, "-o", chained.to_str().unwrap(), "--force"]);
+    assert_eq!(out.status.code(), Some(2));
+}
