@@ -381,15 +381,25 @@ fn closest_between_lines(x: DVec3, t: DVec3, y: DVec3, u: DVec3) -> Option<DVec3
     Some((x + t * s + y + u * r) * 0.5)
 }
 
+/// Farthest a line may pass from the corner re-solved from it (see `resolve_corners`), in
+/// corner zones. The lines of a true corner meet to within the scatter of the curve vertices
+/// they are fitted to: on the simple noisy shapes (cube, step, chamfer, octahedron, at 0.01 dB,
+/// 0.02 dB and 4 kappa) within 0.01-0.10 zones. Where lines missed by more (0.23-0.44 zones on
+/// fandisk at 0.02 dB), a curve that is not straight, or one joined to the wrong corner, had
+/// passed as straight, and the corner moved away from the truth by up to 2.6 tolerances.
+const LINE_MISS: f64 = 0.15;
+
 /// Re-solves the corners and straightens the curves into them. Edge points within the RMLS
 /// radius of a corner come from neighbourhoods that reach a third surface, and under noise
 /// they, and the corners solved from them, are biased (at 0.02 dB noise on the cube, corners
 /// were 0.02-0.09 dB off and curves bulged over the last radius). Where curve ends meet at a
 /// corner, each end that runs straight from one to three `zone`s out gives the line it
 /// follows between one and two zones out, where its edge points saw two surfaces only. With
-/// two or more such lines fixing a point within `zone` of the corner, the corner moves there
-/// and the straight ends drop their vertices inside the zone, running straight into it. A
-/// curved end (a small hole's rim, say) neither gives a line nor is straightened.
+/// two or more such lines fixing a point within `zone` of the corner, each passing within
+/// [`LINE_MISS`] zones of it, the corner moves there and the straight ends drop their vertices
+/// inside the zone, running straight into it. A curved end (a small hole's rim, say) neither
+/// gives a line nor is straightened, and a corner of only two curves is left where it is: it
+/// is a bend, or a join that completion made, and two lines always nearly meet somewhere.
 fn resolve_corners(curves: &mut [Curve], zone: f64) {
     if zone <= 0.0 {
         return;
@@ -410,6 +420,9 @@ fn resolve_corners(curves: &mut [Curve], zone: f64) {
     }
     for (k, ends) in at {
         let q = DVec3::new(f64::from_bits(k[0]), f64::from_bits(k[1]), f64::from_bits(k[2]));
+        if ends.len() < 3 {
+            continue;
+        }
         // Normal equations of the point nearest to the lines: sum (I - d d^T) (x - mean) = 0.
         let (mut a, mut b) = (glam::DMat3::ZERO, DVec3::ZERO);
         let mut straight = vec![];
@@ -418,18 +431,21 @@ fn resolve_corners(curves: &mut [Curve], zone: f64) {
             let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
             a += m;
             b += m * mean;
-            straight.push((ci, e));
+            straight.push((ci, e, mean, d));
         }
         // (Nearly parallel lines, such as two curves running straight through, fix no point.)
         let solved = a.inverse() * b;
         if straight.len() < 2 || a.determinant().abs() <= 1e-3 || !solved.is_finite() || solved.distance(q) > zone {
             continue;
         }
+        if straight.iter().any(|&(_, _, mean, d)| (solved - mean).reject_from_normalized(d).length() > LINE_MISS * zone) {
+            continue;
+        }
         for &(ci, e) in &ends {
             let k = curves[ci].end_index(e);
             curves[ci].v[k] = solved;
         }
-        for (ci, e) in straight {
+        for (ci, e, _, _) in straight {
             trim_zone(&mut curves[ci], e, zone);
         }
     }
@@ -602,6 +618,24 @@ mod tests {
         let before = curves.clone();
         resolve_free_ends(&mut curves, &p, &crate::cancel::Cancel::default());
         assert_eq!(curves, before);
+    }
+
+    #[test]
+    fn a_corner_of_two_curves_or_of_lines_that_miss_stays_where_it_was() {
+        // Two straight arms meeting at an angle: their lines fix a point, but only two curves
+        // meet there.
+        let q = DVec3::new(0.15, 0.1, 0.05);
+        let mut curves = vec![arm(q, DVec3::X, DVec3::Y, 0.5), arm(q, DVec3::Y, DVec3::Z, 0.5)];
+        resolve_corners(&mut curves, 0.5);
+        assert!(curves.iter().all(|c| c.v[0] == q && c.v.len() == 31));
+        // Three arms, one of them shifted 0.3 (0.6 zones) sideways: no point lies within 0.15
+        // zones of all three lines.
+        let mut curves = vec![arm(q, DVec3::X, DVec3::Y, 0.5), arm(q, DVec3::Y, DVec3::Z, 0.5), arm(q, DVec3::Z, DVec3::X, 0.5)];
+        for v in curves[2].v.iter_mut().skip(1) {
+            *v += DVec3::new(0.0, 0.3, 0.0);
+        }
+        resolve_corners(&mut curves, 0.5);
+        assert!(curves.iter().all(|c| c.v[0] == q && c.v.len() == 31));
     }
 
     #[test]
