@@ -100,13 +100,16 @@ impl Workspace {
     }
 
     /// Puts the files and directories named `names` (top-level names, such as `tiles`) in
-    /// `dir` instead of the run directory, from now on (created if needed). In memory, nothing
-    /// changes.
-    pub fn set_work_dir(&mut self, dir: &Path, names: &'static [&'static str]) -> Result<()> {
-        if self.memory.is_none() {
-            std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
-            self.work = Some((dir.to_path_buf(), names));
+    /// `dir` instead of the run directory from now on (created if needed), or back in the run
+    /// directory for None. In memory, nothing changes.
+    pub fn set_work_dir(&mut self, dir: Option<&Path>, names: &'static [&'static str]) -> Result<()> {
+        if self.memory.is_some() {
+            return Ok(());
         }
+        if let Some(dir) = dir {
+            std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+        }
+        self.work = dir.map(|d| (d.to_path_buf(), names));
         Ok(())
     }
 

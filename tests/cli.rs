@@ -99,4 +99,11 @@ fn working_data_goes_to_the_work_dir_and_clean_removes_it() {
     stdout(&["view", &p("plain")]);
     stdout(&["extract", cube, "-o", &p("plain"), "-q", "--force"]);
     assert!(d.path().join("plain/tiles").is_dir());
+    // --force on a run with a work directory, without one: the old working data goes, the
+    // new is in the run directory, and the run resumes from there.
+    stdout(&["extract", cube, "-o", &p("moved"), "-q", "--work-dir", &p("scratch2")]);
+    stdout(&["extract", cube, "-o", &p("moved"), "-q", "--force"]);
+    assert!(!d.path().join("scratch2/tiles").exists() && d.path().join("moved/tiles").is_dir());
+    stdout(&["extract", cube, "-o", &p("moved"), "-q", "--min-confidence", "0.3"]);
+    assert!(stdout(&["status", &p("moved")]).contains("finished"));
 }

@@ -496,6 +496,7 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
         if let Some(old) = manifest::read(ws).ok().flatten() {
             use_work_dir(ws, &old)?;
             remove_working_data(ws);
+            ws.set_work_dir(None, &WORKING)?;
         }
         None
     } else {
@@ -544,7 +545,7 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
         ws.remove(name);
     }
     if let Some(w) = &work_dir {
-        ws.set_work_dir(w, &WORKING)?;
+        ws.set_work_dir(Some(w), &WORKING)?;
         remove_working_data(ws);
     }
     let (b, declared) = bounds()?;
@@ -584,7 +585,7 @@ const WORK_OWNER: &str = "crease-run";
 /// Points `ws` at the working data of the run `m` describes.
 pub(crate) fn use_work_dir(ws: &mut Workspace, m: &Manifest) -> Result<()> {
     match &m.work_dir {
-        Some(w) => ws.set_work_dir(w, &WORKING),
+        Some(w) => ws.set_work_dir(Some(w), &WORKING),
         None => Ok(()),
     }
 }
