@@ -480,7 +480,8 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
     let opts = &RunOptions { work_dir: None, clean: false, ..opts.clone() };
     let (manifest, _) = plan(&mut ws, job, bounds, opts)?;
     let mut run = Run::new(ws, manifest, opts, None);
-    let r = run.tile_passes(&Input::Points(points), params, &here)?.expect("a lone run does every tile");
+    // (A lone run does every tile itself: it has nothing to wait for.)
+    let r = run.tile_passes(&Input::Points(points), params, &here)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
     let (curves, counts, seconds) = run.curves(&r)?;
     Ok(Extraction { curves, params: r, tau: run.tau, counts, seconds })
 }
