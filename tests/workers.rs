@@ -9,18 +9,27 @@ fn crease(args: &[impl AsRef<std::ffi::OsStr>]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_crease")).args(args).output().unwrap()
 }
 
+/// The arguments every run of the fandisk fixture here shares: tiles of 0.4 units, 47 tiles
+/// with points, so that each worker has a share of many.
+const COMMON: [&str; 3] = ["-q", "--tile-size", "0.4"];
+
+/// The fandisk fixture, and the curves one `crease extract` of it writes (into `dir/plain`).
+fn fandisk_and_its_curves(dir: &Path) -> (String, Vec<u8>) {
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/fandisk.las").to_str().unwrap().to_string();
+    let plain = dir.join("plain");
+    let out = crease(&[&["extract", &input, "-o", plain.to_str().unwrap()][..], &COMMON].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    (input, std::fs::read(plain.join("curves.obj")).unwrap())
+}
+
 #[test]
 fn three_workers_write_the_curves_of_one_run_even_when_one_is_killed() {
     let d = tempfile::tempdir().unwrap();
-    let fandisk = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/fandisk.las");
-    let (input, plain, shared) = (fandisk.to_str().unwrap(), d.path().join("plain"), d.path().join("shared"));
-    // (Tiles of 0.4 units: 47 tiles with points, so that each worker has a share of many.)
-    let common = ["-q", "--tile-size", "0.4"];
-    let out = crease(&[&["extract", input, "-o", plain.to_str().unwrap()][..], &common].concat());
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (input, plain) = fandisk_and_its_curves(d.path());
+    let (input, shared) = (input.as_str(), d.path().join("shared"));
     let worker = |i: u32| {
         let w = format!("{i}/3");
-        let args = [&["extract", input, "-o", shared.to_str().unwrap(), "--worker", &w][..], &common].concat();
+        let args = [&["extract", input, "-o", shared.to_str().unwrap(), "--worker", &w][..], &COMMON].concat();
         Command::new(env!("CARGO_BIN_EXE_crease")).args(args).stderr(Stdio::piped()).spawn().unwrap()
     };
     // Rounds of the three side by side, until worker 0 has written the outputs; in the second
@@ -42,8 +51,7 @@ fn three_workers_write_the_curves_of_one_run_even_when_one_is_killed() {
         }
     }
     assert!(rounds >= 2, "one round did it all: the workers did not share the passes");
-    let curves = |dir: &Path| std::fs::read(dir.join("curves.obj")).unwrap();
-    assert_eq!(curves(&shared), curves(&plain));
+    assert_eq!(std::fs::read(shared.join("curves.obj")).unwrap(), plain);
     let status = crease(&["status", shared.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&status.stdout).contains("finished"));
 }
@@ -87,11 +95,9 @@ fn workers_and_lone_runs_do_not_mix_and_each_index_runs_once() {
 #[test]
 fn the_slurm_chain_run_in_order_writes_the_curves_of_one_run() {
     let d = tempfile::tempdir().unwrap();
-    let fandisk = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/fandisk.las");
-    let (input, plain, chained) = (fandisk.to_str().unwrap(), d.path().join("plain"), d.path().join("chained"));
-    let common = ["-q", "--tile-size", "0.4"];
-    assert!(crease(&[&["extract", input, "-o", plain.to_str().unwrap()][..], &common].concat()).status.success());
-    let out = crease(&[&["slurm", input, "-o", chained.to_str().unwrap(), "--tasks", "3"][..], &common, &["--", "--time=5:00"]].concat());
+    let (input, plain) = fandisk_and_its_curves(d.path());
+    let (input, chained) = (input.as_str(), d.path().join("chained"));
+    let out = crease(&[&["slurm", input, "-o", chained.to_str().unwrap(), "--tasks", "3"][..], &COMMON, &["--", "--time=5:00"]].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let scripts: Vec<String> = String::from_utf8_lossy(&out.stdout).lines().map(String::from).collect();
     assert_eq!(scripts.len(), 5);
@@ -109,7 +115,7 @@ fn the_slurm_chain_run_in_order_writes_the_curves_of_one_run() {
             assert!(out.status.success(), "{s} task {task:?}: {}", String::from_utf8_lossy(&out.stderr));
         }
     }
-    assert_eq!(std::fs::read(chained.join("curves.obj")).unwrap(), std::fs::read(plain.join("curves.obj")).unwrap());
+    assert_eq!(std::fs::read(chained.join("curves.obj")).unwrap(), plain);
     let submit = std::fs::read_to_string(chained.join("slurm/submit.sh")).unwrap();
     assert_eq!(submit.matches("--dependency=afterok:$prev").count(), 5);
     // Flags that would break a chain are refused.
