@@ -422,8 +422,8 @@ struct ExtractArgs {
     /// Process each input file on its own, with outputs in OUT/<file stem>/.
     #[arg(long)]
     per_file: bool,
-    /// Keep the working data (the tile store and per-tile results, about 0.7 times the size
-    /// of a LAS input, more for LAZ) in this directory instead of the output directory, e.g.
+    /// Keep the working data (the tile store and per-tile results, about the size of a LAS
+    /// input, more for noisy clouds) in this directory instead of the output directory, e.g.
     /// on a scratch disk (with --per-file, in a subdirectory per file). A resumed run keeps
     /// the one it started with.
     #[arg(long, value_name = "DIR")]
@@ -487,7 +487,11 @@ fn slurm_cmd(a: SlurmArgs) -> Result<(), Error> {
         }
     }
     // (The jobs run extract with the arguments given here, verbatim, but for slurm's own.)
-    let raw: Vec<String> = std::env::args().skip_while(|x| x != "slurm").skip(1).take_while(|x| x != "--").collect();
+    // (std::env::args panics on an argument that is not UTF-8; the scripts are text.)
+    let raw: Vec<String> = std::env::args_os()
+        .map(|x| x.into_string().map_err(|x| Error::Usage(format!("crease slurm: {} is not UTF-8, and the batch scripts are text", x.to_string_lossy()))))
+        .collect::<Result<Vec<_>, _>>()?;
+    let raw: Vec<String> = raw.into_iter().skip_while(|x| x != "slurm").skip(1).take_while(|x| x != "--").collect();
     let mut extract_args = vec![];
     let mut it = raw.into_iter();
     while let Some(x) = it.next() {

@@ -118,7 +118,13 @@ fn the_slurm_chain_run_in_order_writes_the_curves_of_one_run() {
     assert_eq!(std::fs::read(chained.join("curves.obj")).unwrap(), plain);
     let submit = std::fs::read_to_string(chained.join("slurm/submit.sh")).unwrap();
     assert_eq!(submit.matches("--dependency=afterok:$prev").count(), 5);
-    // Flags that would break a chain are refused.
+    // Flags that would break a chain are refused, and so is an argument the scripts cannot
+    // hold (not UTF-8), with a message rather than a panic.
     let out = crease(&["slurm", input, "-o", chained.to_str().unwrap(), "--force"]);
     assert_eq!(out.status.code(), Some(2));
+    use std::os::unix::ffi::OsStrExt;
+    let odd = std::ffi::OsStr::from_bytes(b"scan\xff.las");
+    let out = crease(&[std::ffi::OsStr::new("slurm"), odd, std::ffi::OsStr::new("-o"), chained.as_os_str()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("is not UTF-8"), "{}", String::from_utf8_lossy(&out.stderr));
 }
