@@ -443,6 +443,10 @@ struct ExtractArgs {
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
+    /// Side of the curve stage's growth blocks, in polyline steps (for tests and
+    /// measurements of the stitcher).
+    #[arg(long, hide = true, default_value_t = crease::extract::blocks::BASE_STEPS)]
+    block_steps: f64,
     /// Write the intermediate point sets (candidates per tile, edge cloud, smoothed edge
     /// cloud, corners, grown polylines) to this directory as OBJ files (also taken from
     /// the environment variable CREASE_DEBUG_DIR).
@@ -538,6 +542,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         worker,
         clean,
         quiet,
+        block_steps,
         debug_dir,
         min_confidence,
         min_length,
@@ -583,6 +588,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         formats: format,
         work_dir: None,
         clean,
+        block_steps,
     };
     let params = params.params()?;
     let jobs: Vec<(Vec<PathBuf>, PathBuf, Option<PathBuf>)> = if per_file {

@@ -5,6 +5,47 @@ pub fn peak_rss() -> u64 {
     status_kib("VmHWM:") * 1024
 }
 
+/// The peak resident set size of a stretch of work, sampled every few milliseconds by a thread
+/// of its own. (The kernel's own peak could be started again instead, but then tools that read
+/// it for the whole process, such as `time -v`, would see only the last stretch.)
+pub struct PeakSampler {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<u64>>,
+}
+
+impl PeakSampler {
+    /// Starts sampling.
+    pub fn start() -> PeakSampler {
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = std::thread::Builder::new()
+            .name("crease-rss".into())
+            .spawn(move || {
+                let mut peak = current_rss();
+                while !flag.load(std::sync::atomic::Ordering::Relaxed) {
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                    peak = peak.max(current_rss());
+                }
+                peak
+            })
+            .ok();
+        PeakSampler { stop, thread }
+    }
+
+    /// Stops sampling; the largest resident set size seen, bytes (0 where unavailable).
+    pub fn finish(mut self) -> u64 {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        let last = current_rss();
+        self.thread.take().and_then(|t| t.join().ok()).unwrap_or(0).max(last)
+    }
+}
+
+impl Drop for PeakSampler {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
 /// Current resident set size in bytes (VmRSS), or 0 where unavailable.
 pub fn current_rss() -> u64 {
     status_kib("VmRSS:") * 1024

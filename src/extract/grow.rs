@@ -31,15 +31,17 @@ pub struct Grown {
     pub closed: bool,
 }
 
-/// Grows polylines through `points`, whose k-d tree is `index`. Stops early, with the
-/// polylines grown so far, once `cancel` is set (the caller sees the flag and discards them).
-pub fn grow(points: &[DVec3], index: &Index, p: &GrowParams, cancel: &crate::cancel::Cancel) -> Vec<Grown> {
+/// Grows polylines through `points`, whose k-d tree is `index`, seeded from the first `seeds`
+/// of them (a block's core; the rest is its halo, which polylines grow on through). Stops
+/// early, with the polylines grown so far, once `cancel` is set (the caller sees the flag and
+/// discards them).
+pub fn grow(points: &[DVec3], seeds: usize, index: &Index, p: &GrowParams, cancel: &crate::cancel::Cancel) -> Vec<Grown> {
     let n = points.len();
     if n < 2 {
         return vec![];
     }
     // Seed order by linearity of the step-radius neighbourhood.
-    let lin: Vec<f64> = (0..n)
+    let lin: Vec<f64> = (0..seeds.min(n))
         .into_par_iter()
         .map_init(Vec::new, |nn, i| {
             nn.clear();
@@ -50,7 +52,7 @@ pub fn grow(points: &[DVec3], index: &Index, p: &GrowParams, cancel: &crate::can
             Pca::of(nn.iter().map(|&(j, _)| (points[j as usize], 1.0))).map_or(0.0, |c| c.linearity())
         })
         .collect();
-    let mut order: Vec<u32> = (0..n as u32).filter(|&i| lin[i as usize] > 0.0).collect();
+    let mut order: Vec<u32> = (0..lin.len() as u32).filter(|&i| lin[i as usize] > 0.0).collect();
     order.sort_unstable_by(|&a, &b| lin[b as usize].total_cmp(&lin[a as usize]).then(a.cmp(&b)));
     drop(lin);
     let mut consumed = vec![false; n];

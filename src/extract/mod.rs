@@ -7,13 +7,14 @@
 //! | defaults from them | [`params`] | |
 //! | 1. candidates (MLS residual) | [`candidates`] | [`candidates::tile_residuals`], [`candidates::tile_candidates`] |
 //! | 2. robust projection, corners | [`project`] | [`project::tile_edges`] |
-//! | 3. smoothing, consensus filter | [`smooth`], [`consensus`] | [`polylines::smooth_and_confirm`] |
-//! | 4. growing | [`grow`] | |
-//! | 5. completion | [`complete`] | [`polylines::grow_and_complete`] |
+//! | 3. smoothing, consensus filter | [`smooth`], [`consensus`] | [`polylines::smooth_and_confirm`] (per growth block, [`blocks`]) |
+//! | 4. growing | [`grow`] | [`polylines::grow_block`], then [`stitch`] |
+//! | 5. completion | [`complete`] | [`polylines::complete_lines`] (whole) |
 //!
 //! [`neighbourhood`] holds a tile's points indexed for neighbour queries, [`fit`] the small
 //! fits every stage uses. The pipeline that runs the stages over tiles is [`crate::run`].
 
+pub mod blocks;
 pub mod candidates;
 pub mod complete;
 pub mod consensus;
@@ -25,6 +26,7 @@ pub mod polylines;
 pub mod project;
 pub mod smooth;
 pub mod statistics;
+pub mod stitch;
 
 pub use params::{Params, Resolved};
 pub use project::{TileEdges, WorldCorner, WorldEdge};
@@ -58,6 +60,9 @@ pub struct Counts {
     pub unconfirmed: u64,
     /// Corners after grouping.
     pub corners: u64,
+    /// Growth blocks of the curve stage (see [`blocks`]).
+    #[serde(default)]
+    pub blocks: u64,
     /// Polylines grown.
     pub grown: u64,
     /// Curves written (after completion, less those left out).

@@ -1,19 +1,20 @@
-//! Stages 3 to 5 on edge clouds: corner grouping, smoothing (block by block, with the edge
-//! points around a block as context), the consensus filter, polyline growing and completion,
-//! and the normals each curve vertex carries.
+//! Stages 3 to 5 on edge clouds, a growth block at a time where they are local (see
+//! [`blocks`]): corner grouping, smoothing (with the edge points around a block as context),
+//! the consensus filter, polyline growing cut at the block's border, completion on the
+//! stitched polylines, and the normals and evidence each curve takes from the edge cloud.
 
+use super::blocks::{self, Blocks, Piece};
 use super::complete;
 use super::consensus;
 use super::grow;
 use super::params::Resolved;
 use super::project::{self, WorldCorner, WorldEdge};
 use super::smooth;
+use super::stitch::Line;
 use crate::curves::{Polyline, Vertex};
-use crate::debug::DebugDump;
 use crate::keys::{bits_key, snap, snap_quantum};
 use crate::spatial::Index;
 use glam::DVec3;
-use std::time::Instant;
 
 /// Snaps an edge point's position to quantum `q` and its normals to a millionth.
 pub fn snap_edge(e: &mut WorldEdge, q: f64) {
@@ -58,8 +59,8 @@ pub fn smooth_block(points: &[DVec3], own: usize, grouped: &[DVec3], r: &Resolve
     out
 }
 
-/// The smoothed edge cloud (positions relative to an origin, and the normals of each point's
-/// two surfaces), as stages 4 and 5 take it.
+/// Smoothed edge points (positions relative to an origin, and the normals of each point's two
+/// surfaces), as stage 4 takes them.
 #[derive(Clone, Debug, Default)]
 pub struct SmoothedEdges {
     /// Smoothed positions.
@@ -70,74 +71,60 @@ pub struct SmoothedEdges {
     pub unconfirmed: u64,
 }
 
+impl SmoothedEdges {
+    /// Puts the points in the order of their positions, then normals, so that what follows
+    /// does not depend on the order they came in. (Points equal in both are interchangeable.)
+    pub fn sort(&mut self) {
+        let (p, n) = (&self.points, &self.normals);
+        let mut perm: Vec<u32> = (0..p.len() as u32).collect();
+        perm.sort_unstable_by(|&a, &b| {
+            let (a, b) = (a as usize, b as usize);
+            bits_key(p[a]).cmp(&bits_key(p[b])).then(normal_key(&n[a]).cmp(&normal_key(&n[b])))
+        });
+        self.points = perm.iter().map(|&i| p[i as usize]).collect();
+        self.normals = perm.iter().map(|&i| n[i as usize]).collect();
+    }
+}
+
 /// Stage 3 and, on noise-limited clouds (see [`Resolved::noise_limited`]), the consensus filter
 /// for a block of the edge cloud (see [`smooth_block`]; the normals are those of `points`,
-/// context included): appends the smoothed positions of the first `own` points that their
-/// neighbours confirm (see [`consensus`]), with their normals, to `out`, and counts those
-/// dropped. (The smoothing takes every edge point as context, confirmed or not, so that the
-/// block's context need reach no further.)
-pub fn smooth_and_confirm(points: &[DVec3], normals: &[[glam::Vec3; 2]], own: usize, grouped: &[DVec3], r: &Resolved, out: &mut SmoothedEdges) {
+/// context included): the smoothed positions of the first `own` points, and whether their
+/// neighbours confirm each (see [`consensus`]). (The smoothing takes every edge point as
+/// context, confirmed or not, so that the block's context need reach no further.)
+pub fn smooth_and_confirm(points: &[DVec3], normals: &[[glam::Vec3; 2]], own: usize, grouped: &[DVec3], r: &Resolved) -> (Vec<DVec3>, Vec<bool>) {
     let smoothed = smooth_block(points, own, grouped, r);
     // (Without noise, edge points off a crease are rare and the filter mostly cut sparse
     // stretches into more pieces: nonuniformly sampled fandisk 34 -> 45 curves, the 5 M scene
     // 366 -> 376; so it runs where the neighbourhoods are sized by the noise.)
     let keep = if r.noise_limited() { consensus::confirmed(points, normals, own, r.step) } else { vec![true; own] };
-    let before = out.points.len();
-    for ((p, n), k) in smoothed.into_iter().zip(&normals[..own]).zip(keep) {
-        if k {
-            out.points.push(p);
-            out.normals.push(*n);
-        }
-    }
-    out.unconfirmed += (own - (out.points.len() - before)) as u64;
+    (smoothed, keep)
 }
 
-/// Curves, with what stages 4 and 5 counted and how long they took.
-#[derive(Clone, Debug, Default)]
-pub struct Traced {
-    /// Feature curves in world coordinates.
-    pub curves: Vec<Polyline>,
-    /// Polylines grown (before completion).
-    pub grown: u64,
-    /// Seconds of stage 4.
-    pub growing_seconds: f64,
-    /// Seconds of stage 5.
-    pub completion_seconds: f64,
+/// How far past a block's core its edge points are needed to grow, smooth and confirm its
+/// core's polylines as in the whole cloud: the growing halo, and the smoothing reach beyond it.
+pub fn block_context(r: &Resolved) -> (f64, f64) {
+    let halo = blocks::HALO_STEPS * r.step;
+    (halo, halo + smoothing_reach(r).max(r.step))
 }
 
-/// Stages 4 and 5 on the whole smoothed edge cloud (positions relative to `origin`), in any
-/// order: polyline growing and completion. Once `cancel` is set, what comes back is partial.
-pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3, r: &Resolved, debug: &DebugDump, cancel: &crate::cancel::Cancel) -> Traced {
-    // Sorted first, so the result does not depend on the order the points arrive in. (The
-    // edge cloud is the one part of a run that grows with the whole input, not with a tile:
-    // it is reordered through a permutation rather than as records, so that at most one
-    // extra copy of one of its columns exists at a time.)
-    use rayon::prelude::*;
-    let SmoothedEdges { points, normals, .. } = edges;
-    let mut perm: Vec<u32> = (0..points.len() as u32).collect();
-    // (Points equal in position and normals are interchangeable: the unstable order of
-    // such ties changes nothing.)
-    perm.par_sort_unstable_by(|&a, &b| {
-        let (a, b) = (a as usize, b as usize);
-        bits_key(points[a]).cmp(&bits_key(points[b])).then(normal_key(&normals[a]).cmp(&normal_key(&normals[b])))
-    });
-    let points = permute(points, &perm);
-    let normals = permute(normals, &perm);
-    drop(perm);
-    debug.points("smoothed.obj", &points, origin);
-    debug.points("corners.obj", grouped, origin);
-    let t = Instant::now();
-    let index = (!points.is_empty()).then(|| Index::new_parallel(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()));
-    let grown = index.as_ref().map_or(vec![], |ix| grow::grow(&points, ix, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg }, cancel));
-    if debug.on() {
-        let pl: Vec<Polyline> = grown.iter().enumerate().map(|(i, g)| Polyline::from_points(i as u32, g.vertices.iter().map(|p| *p + origin))).collect();
-        debug.polylines("grown.obj", &pl);
+/// Stage 4 for a block: polylines grown from the smoothed edge points of its core (`core`, in
+/// order, see [`SmoothedEdges::sort`]) on through those of its halo (`halo`, in order), cut
+/// to what the block owns (see [`blocks::cut`]; `b` is its number in `blocks`). Once `cancel`
+/// is set, what comes back is partial.
+pub fn grow_block(core: &[DVec3], halo: &[DVec3], blocks: &Blocks, b: u32, r: &Resolved, cancel: &crate::cancel::Cancel) -> Vec<Piece> {
+    let points: Vec<DVec3> = core.iter().chain(halo).copied().collect();
+    if points.is_empty() {
+        return vec![];
     }
-    let mut traced = Traced { grown: grown.len() as u64, growing_seconds: t.elapsed().as_secs_f64(), ..Default::default() };
-    if cancel.is_set() {
-        return traced;
-    }
-    let t = Instant::now();
+    let index = Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>());
+    let grown = grow::grow(&points, core.len(), &index, &grow::GrowParams { step: r.step, max_turn_deg: r.max_turn_deg }, cancel);
+    let (block, halo) = (&blocks.list[b as usize], blocks::HALO_STEPS * r.step);
+    grown.iter().flat_map(|g| blocks::cut(&g.vertices, g.closed, block, |p| blocks.find(p, halo) == Some(b))).collect()
+}
+
+/// Stage 5 on the stitched polylines (relative to the origin of the corners `grouped`).
+/// Once `cancel` is set, what comes back is partial.
+pub fn complete_lines(lines: Vec<Line>, grouped: &[DVec3], r: &Resolved, cancel: &crate::cancel::Cancel) -> Vec<complete::Curve> {
     let cp = complete::CompleteParams {
         step: r.step,
         reach: r.reach_steps,
@@ -146,13 +133,100 @@ pub fn grow_and_complete(edges: SmoothedEdges, grouped: &[DVec3], origin: DVec3,
         smooth_passes: 2,
         corner_zone: r.corner_radius,
     };
-    let curves = complete::complete(grown.into_iter().map(|g| complete::Curve::new(g.vertices, g.closed)).collect(), grouped, &cp, cancel);
-    if cancel.is_set() {
-        return traced;
+    complete::complete(lines.into_iter().map(|(v, closed)| complete::Curve::new(v, closed)).collect(), grouped, &cp, cancel)
+}
+
+/// The smoothed edge points near a curve, indexed: what a curve's vertex normals and evidence
+/// are taken from, a region at a time.
+pub struct NearEdges<'a> {
+    index: Index,
+    normals: &'a [[glam::Vec3; 2]],
+    step: f64,
+}
+
+impl<'a> NearEdges<'a> {
+    /// Indexes `points` (in order, see [`SmoothedEdges::sort`]) with their `normals`. Queries
+    /// look half a step around them.
+    pub fn new(points: &[DVec3], normals: &'a [[glam::Vec3; 2]], step: f64) -> NearEdges<'a> {
+        NearEdges { index: Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()), normals, step }
     }
-    traced.curves = to_polylines(&curves, index.as_ref(), &normals, origin, r.step);
-    traced.completion_seconds = t.elapsed().as_secs_f64();
-    traced
+
+    /// The normal pairs of the edge points within half a step of `p`, the first point's first,
+    /// each ordered and signed to agree with the first's.
+    fn pairs_at(&self, p: DVec3, nn: &mut Vec<(u32, f32)>) -> Vec<[DVec3; 2]> {
+        nn.clear();
+        if !self.index.is_empty() {
+            self.index.within(&p.as_vec3().to_array(), (0.5 * self.step) as f32, nn);
+        }
+        nn.sort_unstable_by_key(|a| a.0);
+        let pair = |j: u32| self.normals[j as usize].map(|v| v.as_dvec3());
+        nn.first().map_or(vec![], |f| nn.iter().map(|&(j, _)| align(pair(j), pair(f.0))).collect())
+    }
+
+    /// The mean normal pair of the edge points within half a step of `p`, if any.
+    pub fn normals_at(&self, p: DVec3) -> Option<[DVec3; 2]> {
+        let pairs = self.pairs_at(p, &mut vec![]);
+        let sum = pairs.iter().fold([DVec3::ZERO; 2], |s, a| [s[0] + a[0], s[1] + a[1]]);
+        let mean = [sum[0].normalize_or_zero(), sum[1].normalize_or_zero()];
+        (!pairs.is_empty() && mean[0] != DVec3::ZERO).then_some(mean)
+    }
+
+    /// How well the normal pairs of the edge points within half a step of `p` agree with their
+    /// mean (see [`Evidence::agreement`]), if there are any.
+    pub fn agreement_at(&self, p: DVec3) -> Option<f64> {
+        let pairs = self.pairs_at(p, &mut vec![]);
+        if pairs.is_empty() {
+            return None;
+        }
+        let sum = pairs.iter().fold([DVec3::ZERO; 2], |s, a| [s[0] + a[0], s[1] + a[1]]);
+        let mean = [sum[0].normalize_or_zero(), sum[1].normalize_or_zero()];
+        Some(pairs.iter().map(|&a| align(a, mean)).map(|a| a[0].dot(mean[0]).min(a[1].dot(mean[1])).max(0.0)).sum::<f64>() / pairs.len() as f64)
+    }
+}
+
+/// The places, every half step along the curve through `v` (closed if `closed`), at which its
+/// evidence is looked at.
+pub fn places(v: &[DVec3], closed: bool, step: f64) -> Vec<DVec3> {
+    let mut places = vec![];
+    let n = v.len();
+    let segments = if closed && n > 2 { n } else { n.saturating_sub(1) };
+    for k in 0..segments {
+        let (a, b) = (v[k], v[(k + 1) % n]);
+        let parts = ((b - a).length() / (0.5 * step)).ceil().max(1.0) as usize;
+        places.extend((0..parts).map(|i| a.lerp(b, i as f64 / parts as f64)));
+    }
+    if !closed || n <= 2 {
+        places.extend(v.last());
+    }
+    places
+}
+
+/// A curve's vertex normals and the agreement at each of its [`places`], as looked up in the
+/// edge cloud region by region, made into the output polyline `id` (world coordinates, from
+/// positions relative to `origin`): the normals' orientation is carried along the curve, and
+/// vertices without normals take their neighbours'.
+pub fn finish(id: u32, c: &complete::Curve, normals: &[Option<[DVec3; 2]>], agreement: &[Option<f64>], origin: DVec3, step: f64) -> Polyline {
+    let mut prev: Option<[DVec3; 2]> = None;
+    let mut n: Vec<[DVec3; 2]> = vec![[DVec3::ZERO; 2]; c.v.len()];
+    for (i, m) in normals.iter().enumerate() {
+        if let (Some(m), false) = (m, c.corner[i]) {
+            let m = prev.map_or(*m, |p| align(*m, p));
+            n[i] = m;
+            prev = Some(m);
+        }
+    }
+    fill_from_neighbours(&mut n);
+    let vertices = c.v.iter().zip(&n).zip(&c.corner).map(|((&p, n), &corner)| Vertex { p: p + origin, n: [n[0].as_vec3(), n[1].as_vec3()], corner }).collect();
+    let mut line = Polyline { id, closed: c.closed, vertices, confidence: 0.0 };
+    let covered: Vec<f64> = agreement.iter().flatten().copied().collect();
+    let length = c.v.windows(2).map(|w| w[0].distance(w[1])).sum::<f64>() + if c.closed && c.v.len() > 2 { c.v[0].distance(c.v[c.v.len() - 1]) } else { 0.0 };
+    let evidence = Evidence {
+        length_steps: length / step,
+        coverage: covered.len() as f64 / agreement.len().max(1) as f64,
+        agreement: covered.iter().sum::<f64>() / covered.len().max(1) as f64,
+    };
+    line.confidence = evidence.confidence() as f32;
+    line
 }
 
 /// Gives each vertex without normals (corners, and vertices with no edge point near) those of
@@ -177,64 +251,6 @@ fn fill_from_neighbours(normals: &mut [[DVec3; 2]]) {
             normals[i] = normals[j];
         }
     }
-}
-
-/// `v` reordered by `perm` (consumed, so that the unordered copy is freed at once).
-fn permute<T: Copy>(v: Vec<T>, perm: &[u32]) -> Vec<T> {
-    perm.iter().map(|&i| v[i as usize]).collect()
-}
-
-/// Attaches normals (from the nearest edge points, orientation carried along each curve) and
-/// the evidence for each curve (see [`Evidence`]), and converts to world coordinates.
-fn to_polylines(curves: &[complete::Curve], index: Option<&Index>, edge_normals: &[[glam::Vec3; 2]], origin: DVec3, step: f64) -> Vec<Polyline> {
-    let mut nn = Vec::new();
-    curves
-        .iter()
-        .enumerate()
-        .map(|(id, c)| {
-            let mut prev: Option<[DVec3; 2]> = None;
-            let mut normals = vec![[DVec3::ZERO; 2]; c.v.len()];
-            for (i, &p) in c.v.iter().enumerate() {
-                if c.corner[i] {
-                    continue;
-                }
-                nn.clear();
-                if let Some(ix) = index {
-                    ix.within(&p.as_vec3().to_array(), (0.5 * step) as f32, &mut nn);
-                    if nn.is_empty() {
-                        ix.nearest_n(&p.as_vec3().to_array(), 1, &mut nn);
-                    }
-                }
-                if nn.is_empty() {
-                    continue;
-                }
-                nn.sort_unstable_by_key(|a| a.0);
-                let mut acc = [DVec3::ZERO; 2];
-                let pair = |j: u32| edge_normals[j as usize].map(|v| v.as_dvec3());
-                let reference = prev.unwrap_or(pair(nn[0].0));
-                for &(j, _) in &nn {
-                    let n = align(pair(j), reference);
-                    acc[0] += n[0];
-                    acc[1] += n[1];
-                }
-                let mean = [acc[0].normalize_or_zero(), acc[1].normalize_or_zero()];
-                if mean[0] != DVec3::ZERO {
-                    normals[i] = mean;
-                    prev = Some(mean);
-                }
-            }
-            fill_from_neighbours(&mut normals);
-            let vertices: Vec<Vertex> =
-                c.v.iter()
-                    .zip(&normals)
-                    .zip(&c.corner)
-                    .map(|((&p, n), &corner)| Vertex { p: p + origin, n: [n[0].as_vec3(), n[1].as_vec3()], corner })
-                    .collect();
-            let mut line = Polyline { id: id as u32, closed: c.closed, vertices, confidence: 0.0 };
-            line.confidence = index.map_or(0.0, |ix| Evidence::along(&c.v, c.closed, ix, edge_normals, step).confidence() as f32);
-            line
-        })
-        .collect()
 }
 
 /// The length, in polyline steps, over which a curve's length term of confidence rises to 1 -
@@ -267,46 +283,6 @@ pub struct Evidence {
 }
 
 impl Evidence {
-    /// The evidence along the curve through `v` (closed if `closed`), from the edge cloud
-    /// indexed by `index` with the normals `normals`, for polyline step `step`.
-    fn along(v: &[DVec3], closed: bool, index: &Index, normals: &[[glam::Vec3; 2]], step: f64) -> Evidence {
-        let mut places = vec![];
-        let n = v.len();
-        let segments = if closed && n > 2 { n } else { n.saturating_sub(1) };
-        let mut length = 0.0;
-        for k in 0..segments {
-            let (a, b) = (v[k], v[(k + 1) % n]);
-            let parts = ((b - a).length() / (0.5 * step)).ceil().max(1.0) as usize;
-            places.extend((0..parts).map(|i| a.lerp(b, i as f64 / parts as f64)));
-            length += (b - a).length();
-        }
-        if !closed || n <= 2 {
-            places.extend(v.last());
-        }
-        let (mut covered, mut agreement) = (0usize, 0.0);
-        let mut near = vec![];
-        for p in &places {
-            near.clear();
-            index.within(&p.as_vec3().to_array(), (0.5 * step) as f32, &mut near);
-            if near.is_empty() {
-                continue;
-            }
-            near.sort_unstable_by_key(|a| a.0);
-            let pair = |j: u32| normals[j as usize].map(|x| x.as_dvec3());
-            let reference = pair(near[0].0);
-            let sum = near.iter().fold([DVec3::ZERO; 2], |s, &(j, _)| {
-                let a = align(pair(j), reference);
-                [s[0] + a[0], s[1] + a[1]]
-            });
-            let mean = [sum[0].normalize_or_zero(), sum[1].normalize_or_zero()];
-            covered += 1;
-            agreement +=
-                near.iter().map(|&(j, _)| align(pair(j), mean)).map(|a| a[0].dot(mean[0]).min(a[1].dot(mean[1])).max(0.0)).sum::<f64>() / near.len() as f64;
-        }
-        let seen = covered.max(1) as f64;
-        Evidence { length_steps: length / step, coverage: covered as f64 / places.len().max(1) as f64, agreement: agreement / seen }
-    }
-
     /// The curve's confidence, 0 to 1: the product of its coverage, a length term that
     /// saturates over a few steps (1 - exp(-length / [`CONFIDENT_STEPS`])), and its agreement
     /// above [`AGREEMENT_FLOOR`], rescaled to 0-1.

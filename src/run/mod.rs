@@ -19,6 +19,7 @@
 //! done, so a run killed at any moment resumes where it stopped and ends with the same curves.
 
 pub(crate) mod bucket;
+mod curves;
 pub mod manifest;
 pub(crate) mod pass;
 pub mod plan;
@@ -35,11 +36,11 @@ use crate::curves::{Format, Polyline};
 use crate::debug::DebugDump;
 use crate::error::{Error, Result};
 use crate::extract::candidates::{self, ResidualSum};
-use crate::extract::polylines::{self, SmoothedEdges};
+use crate::extract::polylines;
 use crate::extract::statistics::{self, StatsTile};
 use crate::extract::{project, Counts, Params, Resolved, Timings};
 use crate::io::{self, Filter};
-use crate::keys::{keep_point, key_quantum, position_key, settle, snap_quantum};
+use crate::keys::{keep_point, key_quantum, position_key, settle};
 use crate::points::{Bounds, Crs, TilePoints};
 use crate::progress::Progress;
 use crate::tiles::{Bucketer, Grid, Store};
@@ -87,6 +88,11 @@ pub struct RunOptions {
     /// Removes the working data once the outputs are written: the run can then no longer be
     /// resumed, re-filtered or viewed over its points, only run again with `force`.
     pub clean: bool,
+    /// Side of the curve stage's growth blocks, in polyline steps (see
+    /// [`crate::extract::blocks`]). Smaller blocks cut more polylines for the stitcher to
+    /// join; the default suits every input, and the option is there for tests and
+    /// measurements.
+    pub block_steps: f64,
 }
 
 /// One of `count` processes sharing a run: worker `index` does the tiles whose number modulo
@@ -149,6 +155,7 @@ impl Default for RunOptions {
             formats: Format::DEFAULT.to_vec(),
             work_dir: None,
             clean: false,
+            block_steps: crate::extract::blocks::BASE_STEPS,
         }
     }
 }
@@ -179,9 +186,11 @@ pub struct Report {
     pub total_seconds: f64,
     /// Peak resident memory of this invocation, bytes.
     pub peak_rss_bytes: u64,
-    /// Peak resident memory of this invocation up to the end of the tile passes, bytes (the
-    /// difference to `peak_rss_bytes` is what the curve stages added).
+    /// Peak resident memory of this invocation up to the end of the tile passes, bytes.
     pub peak_rss_tiles_bytes: u64,
+    /// Peak resident memory during the curve stage (stages 3-5 and the outputs), bytes, as
+    /// sampled every few milliseconds (see [`crate::mem::PeakSampler`]).
+    pub peak_rss_curves_bytes: u64,
     /// Worker threads.
     pub threads: usize,
     /// Tiles in the grid.
@@ -578,7 +587,7 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
 }
 
 /// The top-level names of a run's working data: the tile store and the per-tile results.
-const WORKING: [&str; 4] = [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR];
+const WORKING: [&str; 5] = [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, records::Smoothed::DIR];
 
 /// Name of the file by which a work directory names the run directory it belongs to.
 const WORK_OWNER: &str = "crease-run";
@@ -640,6 +649,8 @@ struct Run<'a> {
     evaluated: u64,
     /// Peak memory by the end of the tile passes.
     peak_rss_tiles: u64,
+    /// Samples the memory of the curve stage, from its start to the report.
+    curve_peak: Option<crate::mem::PeakSampler>,
     /// Damaged results removed to be computed again.
     repaired: Vec<PathBuf>,
     /// This process's share of a run that several share.
@@ -653,7 +664,22 @@ impl<'a> Run<'a> {
         let kq = key_quantum(manifest.diag);
         let progress = Progress::new(opts.progress);
         let pass = PassSeconds::default();
-        Run { ws, manifest, opts, progress, pass, tiles: vec![], kq, tau: 0.0, evaluated: 0, peak_rss_tiles: 0, repaired: vec![], worker, waiting: None }
+        Run {
+            ws,
+            manifest,
+            opts,
+            progress,
+            pass,
+            tiles: vec![],
+            kq,
+            tau: 0.0,
+            evaluated: 0,
+            peak_rss_tiles: 0,
+            curve_peak: None,
+            repaired: vec![],
+            worker,
+            waiting: None,
+        }
     }
 
     /// The tiles this process computes in a pass: all of them, or a worker's share.
@@ -862,104 +888,6 @@ impl<'a> Run<'a> {
         Ok(self.all_done::<Edges>("projection"))
     }
 
-    /// A tile's edge points, snapped, with its corners and counts.
-    fn stored_edges(&self, t: u32, q: f64) -> Result<crate::extract::TileEdges> {
-        let mut e = records::read::<Edges>(&self.ws, t)?.0;
-        for x in e.edges.iter_mut() {
-            polylines::snap_edge(x, q);
-        }
-        Ok(e)
-    }
-
-    /// Curve stages. Stage 3 (smoothing) is local: each tile's edge points are smoothed with
-    /// the edge points of the neighbouring tiles within the smoothing reach as context, so
-    /// only a few tiles' edge points are held at a time. Stages 4-5 run on the whole smoothed
-    /// edge cloud (positions and normals, 48 bytes a point).
-    fn curves(&mut self, r: &Resolved) -> Result<(Vec<Polyline>, Counts, Timings)> {
-        let t = Instant::now();
-        crate::mem::release_free_memory();
-        let q = snap_quantum(r.kappa);
-        // Bounds of each tile's edge points, and all corner points.
-        let mut counts = Counts { points: self.manifest.tile_points.iter().sum(), evaluated: self.evaluated, ..Default::default() };
-        let mut boxes: Vec<(u32, DVec3, DVec3)> = vec![];
-        let mut corners = vec![];
-        for &t in &self.tiles {
-            let e = self.stored_edges(t, q)?;
-            counts.candidates += e.candidates;
-            counts.one_surface += e.one_surface;
-            counts.scattered += e.scattered;
-            counts.edge_points += e.edges.len() as u64;
-            counts.corner_points += e.corners.len() as u64;
-            corners.extend(e.corners);
-            if let Some(lo) = e.edges.iter().map(|x| x.p).reduce(DVec3::min) {
-                boxes.push((t, lo, e.edges.iter().map(|x| x.p).reduce(DVec3::max).unwrap()));
-            }
-        }
-        let origin = boxes.iter().map(|b| b.1).reduce(DVec3::min).unwrap_or(DVec3::ZERO);
-        let grouped = polylines::group_corners(corners, origin, r);
-        counts.corners = grouped.len() as u64;
-        let smoothed = self.smooth(&boxes, origin, &grouped, r, counts.edge_points as usize)?;
-        counts.unconfirmed = smoothed.unconfirmed;
-        let mut seconds = Timings {
-            candidates: self.pass.residuals,
-            projection: self.pass.projection,
-            index: self.pass.statistics,
-            smoothing: t.elapsed().as_secs_f64(),
-            ..Default::default()
-        };
-        let traced = polylines::grow_and_complete(smoothed, &grouped, origin, r, &self.opts.debug, &self.opts.cancel);
-        self.opts.cancel.check()?;
-        let all = traced.curves.len();
-        let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
-        let curves: Vec<Polyline> = traced.curves.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
-        (counts.grown, counts.curves, counts.left_out) = (traced.grown, curves.len() as u64, (all - curves.len()) as u64);
-        (seconds.growing, seconds.completion) = (traced.growing_seconds, traced.completion_seconds);
-        self.pass.curves = t.elapsed().as_secs_f64();
-        Ok((curves, counts, seconds))
-    }
-
-    /// Stage 3 and the consensus filter, tile by tile (`boxes`: each tile's edge point bounds),
-    /// positions relative to `origin`.
-    fn smooth(&self, boxes: &[(u32, DVec3, DVec3)], origin: DVec3, grouped: &[DVec3], r: &Resolved, edge_points: usize) -> Result<SmoothedEdges> {
-        let q = snap_quantum(r.kappa);
-        // (The margin covers the f32 rounding of the k-d tree's distances.)
-        let reach = polylines::smoothing_reach(r) * 1.001 + 4.0 * q;
-        let mut debug_edges = vec![];
-        let mut out = SmoothedEdges { points: Vec::with_capacity(edge_points), normals: Vec::with_capacity(edge_points), unconfirmed: 0 };
-        let bar = self.progress.bar("smoothing", boxes.len() as u64, "tiles");
-        for &(t, lo, hi) in boxes {
-            let (lo, hi) = (lo - DVec3::splat(reach), hi + DVec3::splat(reach));
-            let inside = |p: DVec3| p.cmpge(lo).all() && p.cmple(hi).all();
-            // (Decoded on the pool, which waits for them: the tile's edge points, and those of
-            // its neighbours within reach, in order.)
-            let (own, context) = rayon::join(
-                || self.stored_edges(t, q),
-                || {
-                    let near: Vec<u32> = boxes.iter().filter(|&&(u, ulo, uhi)| u != t && ulo.cmple(hi).all() && uhi.cmpge(lo).all()).map(|b| b.0).collect();
-                    near.par_iter()
-                        .map(|&u| Ok(self.stored_edges(u, q)?.edges.into_iter().filter(|e| inside(e.p)).collect::<Vec<_>>()))
-                        .collect::<Result<Vec<_>>>()
-                },
-            );
-            let (own, context) = (own?.edges, context?);
-            let size = own.len() + context.iter().map(Vec::len).sum::<usize>();
-            let (mut block, mut block_normals) = (Vec::with_capacity(size), Vec::with_capacity(size));
-            for e in own.iter().chain(context.iter().flatten()) {
-                block.push(e.p - origin);
-                block_normals.push(e.n);
-            }
-            if self.opts.debug.on() {
-                debug_edges.extend_from_slice(&block[..own.len()]);
-            }
-            polylines::smooth_and_confirm(&block, &block_normals, own.len(), grouped, r, &mut out);
-            bar.inc(1);
-            self.opts.cancel.check()?;
-        }
-        bar.finish();
-        self.opts.debug.points("edges.obj", &debug_edges, origin);
-        Ok(out)
-    }
-
     /// Removes the working data of a finished run (`--clean`), then marks it so in the
     /// manifest.
     fn clean(&mut self) -> Result<()> {
@@ -989,7 +917,7 @@ impl<'a> Run<'a> {
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn report(&self, inputs: Vec<PathBuf>, r: Resolved, tau: f64, counts: Counts, seconds: Timings, t0: Instant, resumed: bool) -> Report {
+    fn report(&mut self, inputs: Vec<PathBuf>, r: Resolved, tau: f64, counts: Counts, seconds: Timings, t0: Instant, resumed: bool) -> Report {
         let grid = &self.manifest.grid;
         Report {
             version: env!("CARGO_PKG_VERSION").to_string(),
@@ -1005,6 +933,7 @@ impl<'a> Run<'a> {
             total_seconds: t0.elapsed().as_secs_f64(),
             peak_rss_bytes: crate::mem::peak_rss(),
             peak_rss_tiles_bytes: self.peak_rss_tiles,
+            peak_rss_curves_bytes: self.curve_peak.take().map_or(0, |s| s.finish()),
             threads: rayon::current_num_threads(),
             tiles: grid.len(),
             tile_size: grid.size,
@@ -1071,7 +1000,7 @@ fn is_run_file(dir: &Path, f: &Path) -> bool {
     };
     let top = rel.components().next().map(|c| c.as_os_str().to_string_lossy().into_owned()).unwrap_or_default();
     // (Workers' locks are `lock.<i>`.)
-    [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, "out.tmp", manifest::NAME, "lock", VIEW].contains(&top.as_str())
+    (WORKING.contains(&top.as_str()) || ["out.tmp", manifest::NAME, "lock", VIEW].contains(&top.as_str()))
         || OUTPUTS.contains(&top.as_str())
         || top.strip_prefix("lock.").is_some_and(|i| i.parse::<u32>().is_ok())
 }

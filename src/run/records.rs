@@ -4,6 +4,7 @@
 use crate::codec::{self, Reader, Writer};
 use crate::error::{Error, Result};
 use crate::extract::candidates::{Residual, TileResiduals};
+use crate::extract::polylines::SmoothedEdges;
 use crate::extract::statistics::PointStats;
 use crate::extract::{TileEdges, WorldCorner, WorldEdge};
 use crate::workspace::Workspace;
@@ -142,6 +143,36 @@ impl Record for Edges {
         let n = r.count(32)?;
         let corners = (0..n).map(|_| Ok(WorldCorner { p: dvec3(r)?, w: r.f64()? })).collect::<Result<_>>()?;
         Ok(Edges(TileEdges { edges, corners, candidates, one_surface, scattered }))
+    }
+}
+
+/// The smoothed, confirmed edge points of a growth block's core (see
+/// [`crate::extract::blocks`]), by block number rather than tile.
+pub struct Smoothed(pub SmoothedEdges);
+
+impl Record for Smoothed {
+    const KIND: [u8; 4] = *b"SMTH";
+    const DIR: &'static str = "smoothed";
+
+    fn encode(&self, w: &mut Writer) {
+        let s = &self.0;
+        w.u64(s.unconfirmed);
+        w.u64(s.points.len() as u64);
+        for (p, n) in s.points.iter().zip(&s.normals) {
+            p.to_array().iter().for_each(|&x| w.f64(x));
+            n.iter().flat_map(|n| n.to_array()).for_each(|x| w.f32(x));
+        }
+    }
+
+    fn decode(r: &mut Reader) -> Result<Self> {
+        let unconfirmed = r.u64()?;
+        let n = r.count(48)?;
+        let mut s = SmoothedEdges { unconfirmed, points: Vec::with_capacity(n), normals: Vec::with_capacity(n) };
+        for _ in 0..n {
+            s.points.push(dvec3(r)?);
+            s.normals.push([vec3(r)?, vec3(r)?]);
+        }
+        Ok(Smoothed(s))
     }
 }
 

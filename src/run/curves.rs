@@ -1,0 +1,330 @@
+//! The curve stage (stages 3-5) over the edge points of every tile, in memory bounded whatever
+//! the size of the edge cloud: the edge cloud is taken a growth block at a time (see
+//! [`crate::extract::blocks`]), and only the polylines are whole.
+
+use super::records::{self, Record, Smoothed};
+use super::Run;
+use crate::curves::Polyline;
+use crate::error::Result;
+use crate::extract::blocks::{self, in_box, Blocks, Census, Layers, Piece};
+use crate::extract::polylines::{self, NearEdges, SmoothedEdges};
+use crate::extract::{complete, stitch, Counts, Resolved, Timings, WorldEdge};
+use crate::keys::snap_quantum;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// A tile's edge points at a glance: its number and the bounds of its edge points (relative to
+/// the origin).
+type TileBox = (u32, DVec3, DVec3);
+
+/// What the survey of the edge points found (see [`Run::survey`]).
+struct Survey {
+    counts: Counts,
+    boxes: Vec<TileBox>,
+    blocks: Blocks,
+    /// Grouped corners, relative to the origin.
+    grouped: Vec<DVec3>,
+    /// The origin of the curve stage's positions, and of the blocks' grid.
+    origin: DVec3,
+}
+
+/// Positions to look up in a block: (curve, vertex or place, position).
+type Lookups = Vec<(u32, u32, DVec3)>;
+
+impl Run<'_> {
+    /// Stages 3-5, as the method runs them, a block at a time where they are local:
+    /// 1. survey the edge points: counts, corners (grouped over the whole cloud), and the
+    ///    growth blocks;
+    /// 2. per block: smoothing and the consensus filter (stage 3), then growing (stage 4) from
+    ///    the block's core, cut at its border;
+    /// 3. the stitcher joins the pieces across the borders;
+    /// 4. completion (stage 5) on the stitched polylines;
+    /// 5. per block again: the curves' normals and evidence from the smoothed edge points.
+    pub(super) fn curves(&mut self, r: &Resolved) -> Result<(Vec<Polyline>, Counts, Timings)> {
+        let t = Instant::now();
+        crate::mem::release_free_memory();
+        self.curve_peak = Some(crate::mem::PeakSampler::start());
+        let Survey { mut counts, boxes, blocks, grouped, origin } = self.survey(r)?;
+        let mut seconds = Timings { candidates: self.pass.residuals, projection: self.pass.projection, index: self.pass.statistics, ..Default::default() };
+        let pieces = self.grow_blocks(&boxes, &blocks, &grouped, origin, r, &mut counts, &mut seconds)?;
+        let lines = stitch::stitch(pieces, 0.5 * r.step, 0.25 * r.step);
+        counts.grown = lines.len() as u64;
+        if self.opts.debug.on() {
+            let pl: Vec<Polyline> = lines.iter().enumerate().map(|(i, l)| Polyline::from_points(i as u32, l.0.iter().map(|p| *p + origin))).collect();
+            self.opts.debug.polylines("grown.obj", &pl);
+            self.opts.debug.points("corners.obj", &grouped, origin);
+        }
+        let tc = Instant::now();
+        let curves = polylines::complete_lines(lines, &grouped, r, &self.opts.cancel);
+        self.opts.cancel.check()?;
+        let traced = self.attribute(&curves, &blocks, origin, r)?;
+        seconds.completion = tc.elapsed().as_secs_f64();
+        let all = traced.len();
+        let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
+        let curves: Vec<Polyline> = traced.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
+        (counts.curves, counts.left_out) = (curves.len() as u64, (all - curves.len()) as u64);
+        self.pass.curves = t.elapsed().as_secs_f64();
+        Ok((curves, counts, seconds))
+    }
+
+    /// A tile's edge points, snapped, with its corners and counts.
+    fn stored_edges(&self, t: u32, q: f64) -> Result<crate::extract::TileEdges> {
+        let mut e = records::read::<records::Edges>(&self.ws, t)?.0;
+        for x in e.edges.iter_mut() {
+            polylines::snap_edge(x, q);
+        }
+        Ok(e)
+    }
+
+    /// Reads every tile's edge points: the counts of stages 1-2, the corners (grouped), where
+    /// the blocks' borders go (see [`Layers`]), then, relative to the origin so found, the
+    /// bounds of each tile's edge points and the growth blocks.
+    fn survey(&self, r: &Resolved) -> Result<Survey> {
+        let q = snap_quantum(r.kappa);
+        let anchor = DVec3::from(self.manifest.grid.origin);
+        let side = self.opts.block_steps * r.step;
+        let cell = Census::new(side).cell_side();
+        let mut counts = Counts { points: self.manifest.tile_points.iter().sum(), evaluated: self.evaluated, ..Default::default() };
+        // (Tiles are decoded in parallel, a few at a time, and reduced to what is kept.)
+        let seen = self
+            .tiles
+            .par_iter()
+            .map(|&t| {
+                let e = self.stored_edges(t, q)?;
+                let mut layers = Layers::new(cell, r.step);
+                e.edges.iter().for_each(|x| layers.add(x.p - anchor));
+                let lo = e.edges.iter().map(|x| x.p).reduce(DVec3::min);
+                let hi = e.edges.iter().map(|x| x.p).reduce(DVec3::max);
+                Ok((t, e.candidates, e.one_surface, e.scattered, e.edges.len(), e.corners, layers, lo.zip(hi)))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let (mut boxes, mut corners, mut layers) = (vec![], vec![], Layers::new(cell, r.step));
+        for (t, candidates, one_surface, scattered, edges, c, l, bounds) in seen {
+            counts.candidates += candidates;
+            counts.one_surface += one_surface;
+            counts.scattered += scattered;
+            counts.edge_points += edges as u64;
+            counts.corner_points += c.len() as u64;
+            corners.extend(c);
+            layers.merge(&l);
+            if let Some((lo, hi)) = bounds {
+                boxes.push((t, lo, hi));
+            }
+        }
+        let origin = anchor + layers.borders();
+        for b in boxes.iter_mut() {
+            (b.1, b.2) = (b.1 - origin, b.2 - origin);
+        }
+        let census = boxes
+            .par_iter()
+            .map(|&(t, _, _)| {
+                let mut census = Census::new(side);
+                self.stored_edges(t, q)?.edges.iter().for_each(|x| census.add(x.p - origin));
+                Ok(census)
+            })
+            .try_reduce(
+                || Census::new(side),
+                |mut a, b| {
+                    a.merge(b);
+                    Ok(a)
+                },
+            )?;
+        let grouped = polylines::group_corners(corners, origin, r);
+        counts.corners = grouped.len() as u64;
+        let blocks = blocks::plan(&census);
+        counts.blocks = blocks.list.len() as u64;
+        Ok(Survey { counts, boxes, blocks, grouped, origin })
+    }
+
+    /// Stages 3 and 4, a block at a time. Each block's smoothed, confirmed core is kept in the
+    /// working data for [`Run::attribute`].
+    #[allow(clippy::too_many_arguments)]
+    fn grow_blocks(
+        &self,
+        boxes: &[TileBox],
+        blocks: &Blocks,
+        grouped: &[DVec3],
+        origin: DVec3,
+        r: &Resolved,
+        counts: &mut Counts,
+        seconds: &mut Timings,
+    ) -> Result<Vec<(u32, Piece)>> {
+        let q = snap_quantum(r.kappa);
+        let (halo, reach) = polylines::block_context(r);
+        // (The margin covers the f32 rounding of the k-d tree's distances.)
+        let reach = reach * 1.001 + 4.0 * q;
+        self.ws.remove(Smoothed::DIR);
+        self.ws.create_dir(Smoothed::DIR)?;
+        let (mut debug_edges, mut debug_smoothed) = (vec![], vec![]);
+        let mut pieces = vec![];
+        let bar = self.progress.bar("curves", blocks.list.len() as u64, "blocks");
+        // (Neighbouring blocks read the same tiles: the last few decoded are kept.)
+        let mut tiles = Recent::new(self.opts.memory / 16 / 48);
+        for (b, block) in blocks.list.iter().enumerate() {
+            let t = Instant::now();
+            let region = block.around(reach);
+            let near: Vec<u32> = boxes.iter().filter(|&&(_, lo, hi)| lo.cmple(region.1).all() && hi.cmpge(region.0).all()).map(|x| x.0).collect();
+            let edges = tiles.get(&near, |u| Ok(self.stored_edges(u, q)?.edges))?;
+            let edges = edges.iter().map(|e| e.iter().filter(|e| in_box(region, e.p - origin)).copied().collect::<Vec<WorldEdge>>());
+            // The block's own edge points, those of its halo, and the context of both, each in
+            // the order of their positions, whatever the tiles they came from.
+            let grow_box = block.around(halo);
+            let (mut own, mut around, mut context) = (SmoothedEdges::default(), SmoothedEdges::default(), SmoothedEdges::default());
+            for e in edges.into_iter().flatten() {
+                let p = e.p - origin;
+                let to = if blocks.owner(p) == Some(b as u32) {
+                    &mut own
+                } else if in_box(grow_box, p) {
+                    &mut around
+                } else {
+                    &mut context
+                };
+                to.points.push(p);
+                to.normals.push(e.n);
+            }
+            for s in [&mut own, &mut around, &mut context] {
+                s.sort();
+            }
+            if self.opts.debug.on() {
+                debug_edges.extend_from_slice(&own.points);
+            }
+            let (n_own, n_around) = (own.points.len(), around.points.len());
+            let points: Vec<DVec3> = own.points.iter().chain(&around.points).chain(&context.points).copied().collect();
+            let normals: Vec<[glam::Vec3; 2]> = own.normals.iter().chain(&around.normals).chain(&context.normals).copied().collect();
+            drop(context);
+            let (smoothed, keep) = polylines::smooth_and_confirm(&points, &normals, n_own + n_around, grouped, r);
+            let (mut core, mut halo_points) = (SmoothedEdges::default(), SmoothedEdges::default());
+            for (i, (&p, k)) in smoothed.iter().zip(keep).enumerate() {
+                let to = if i < n_own { &mut core } else { &mut halo_points };
+                if k {
+                    to.points.push(p);
+                    to.normals.push(normals[i]);
+                } else if i < n_own {
+                    to.unconfirmed += 1;
+                }
+            }
+            core.sort();
+            halo_points.sort();
+            counts.unconfirmed += core.unconfirmed;
+            if self.opts.debug.on() {
+                debug_smoothed.extend_from_slice(&core.points);
+            }
+            seconds.smoothing += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            pieces.extend(polylines::grow_block(&core.points, &halo_points.points, blocks, b as u32, r, &self.opts.cancel).into_iter().map(|p| (b as u32, p)));
+            self.opts.cancel.check()?;
+            records::write(&self.ws, b as u32, &Smoothed(core))?;
+            seconds.growing += t.elapsed().as_secs_f64();
+            bar.inc(1);
+        }
+        bar.finish();
+        self.opts.debug.points("edges.obj", &debug_edges, origin);
+        self.opts.debug.points("smoothed.obj", &debug_smoothed, origin);
+        Ok(pieces)
+    }
+
+    /// Each curve's vertex normals and evidence, from the smoothed edge points a block at a
+    /// time: each vertex and each place along a curve is looked up in the block that holds it
+    /// (or, off every block, the one it is within a step of), with the smoothed edge points
+    /// within a step and a half of that block.
+    fn attribute(&self, curves: &[complete::Curve], blocks: &Blocks, origin: DVec3, r: &Resolved) -> Result<Vec<Polyline>> {
+        let step = r.step;
+        let places: Vec<Vec<DVec3>> = curves.iter().map(|c| polylines::places(&c.v, c.closed, step)).collect();
+        // What each block is asked: vertices, then places.
+        let mut asked: Vec<(Lookups, Lookups)> = vec![Default::default(); blocks.list.len()];
+        for (c, curve) in curves.iter().enumerate() {
+            for (i, &p) in curve.v.iter().enumerate() {
+                if let (false, Some(b)) = (curve.corner[i], blocks.find(p, step)) {
+                    asked[b as usize].0.push((c as u32, i as u32, p));
+                }
+            }
+            for (k, &p) in places[c].iter().enumerate() {
+                if let Some(b) = blocks.find(p, step) {
+                    asked[b as usize].1.push((c as u32, k as u32, p));
+                }
+            }
+        }
+        let mut smoothed = Recent::new(self.opts.memory / 16 / 48);
+        let mut normals: Vec<Vec<Option<[DVec3; 2]>>> = curves.iter().map(|c| vec![None; c.v.len()]).collect();
+        let mut agreement: Vec<Vec<Option<f64>>> = places.iter().map(|p| vec![None; p.len()]).collect();
+        for (b, (vertices, at)) in asked.into_iter().enumerate() {
+            if vertices.is_empty() && at.is_empty() {
+                continue;
+            }
+            let region = blocks.list[b].around(1.5 * step);
+            let mut near = SmoothedEdges::default();
+            for s in smoothed.get(&blocks.meeting(region.0, region.1), |k| Ok(records::read::<Smoothed>(&self.ws, k)?.0))? {
+                for (&p, &n) in s.points.iter().zip(&s.normals) {
+                    if in_box(region, p) {
+                        near.points.push(p);
+                        near.normals.push(n);
+                    }
+                }
+            }
+            near.sort();
+            let edges = NearEdges::new(&near.points, &near.normals, step);
+            let found: Vec<_> = vertices.par_iter().map(|&(_, _, p)| edges.normals_at(p)).collect();
+            for (&(c, i, _), n) in vertices.iter().zip(found) {
+                normals[c as usize][i as usize] = n;
+            }
+            let found: Vec<_> = at.par_iter().map(|&(_, _, p)| edges.agreement_at(p)).collect();
+            for (&(c, k, _), a) in at.iter().zip(found) {
+                agreement[c as usize][k as usize] = a;
+            }
+            self.opts.cancel.check()?;
+        }
+        Ok(curves.iter().enumerate().map(|(id, c)| polylines::finish(id as u32, c, &normals[id], &agreement[id], origin, step)).collect())
+    }
+}
+
+/// The last few records read (tiles' edge points, blocks' smoothed edge points), up to a number
+/// of points in all, so that neighbouring blocks do not decode the same records again.
+struct Recent<T> {
+    cap: u64,
+    held: u64,
+    items: std::collections::VecDeque<(u32, std::sync::Arc<T>, u64)>,
+}
+
+/// A record's size, in points.
+trait Points {
+    fn points(&self) -> u64;
+}
+
+impl Points for Vec<WorldEdge> {
+    fn points(&self) -> u64 {
+        self.len() as u64
+    }
+}
+
+impl Points for SmoothedEdges {
+    fn points(&self) -> u64 {
+        self.points.len() as u64
+    }
+}
+
+impl<T: Points + Send + Sync> Recent<T> {
+    fn new(cap: u64) -> Recent<T> {
+        Recent { cap, held: 0, items: Default::default() }
+    }
+
+    /// The records `ids`, those not held read by `read` (in parallel), in the order asked.
+    fn get(&mut self, ids: &[u32], read: impl Fn(u32) -> Result<T> + Sync) -> Result<Vec<std::sync::Arc<T>>> {
+        let missing: Vec<u32> = ids.iter().copied().filter(|&k| !self.items.iter().any(|x| x.0 == k)).collect();
+        let read = missing.par_iter().map(|&k| Ok((k, std::sync::Arc::new(read(k)?)))).collect::<Result<Vec<_>>>()?;
+        let out: Vec<std::sync::Arc<T>> = ids
+            .iter()
+            .map(|&k| read.iter().find(|x| x.0 == k).map(|x| x.1.clone()).unwrap_or_else(|| self.items.iter().find(|x| x.0 == k).unwrap().1.clone()))
+            .collect();
+        for (k, item) in read {
+            let n = item.points();
+            self.items.push_back((k, item, n));
+            self.held += n;
+        }
+        while self.held > self.cap {
+            let Some((_, _, n)) = self.items.pop_front() else { break };
+            self.held -= n;
+        }
+        Ok(out)
+    }
+}
