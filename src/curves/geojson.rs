@@ -34,25 +34,32 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
     if crs.horizontal_unit.is_some() || crs.vertical_unit.is_some() {
         head.insert("crs_units".into(), json!({"horizontal": crs.horizontal_unit, "vertical": crs.vertical_unit}));
     }
-    let features: Vec<Value> = curves
-        .iter()
-        .map(|c| {
-            let mut coords: Vec<[f64; 3]> = c.vertices.iter().map(|v| v.p.to_array()).collect();
-            if c.closed && !coords.is_empty() {
-                coords.push(coords[0]);
-            }
-            let [start, end] = c.end_kinds();
-            // (Scalar properties only: Shapefile and FlatGeobuf drop or refuse lists.)
-            json!({
-                "type": "Feature",
-                "properties": {
-                    "id": c.id, "closed": c.closed, "length": c.length(), "confidence": c.confidence,
-                    "angle": c.mean_normal_angle(), "start": start, "end": end, "corners": c.corner_list(),
-                },
-                "geometry": {"type": "LineString", "coordinates": coords},
-            })
-        })
-        .collect();
-    head.insert("features".into(), Value::Array(features));
-    serde_json::to_writer(&mut w, &Value::Object(head)).map_err(std::io::Error::from).and_then(|_| w.flush()).map_err(|e| Error::output(path, e))
+    // (The features are written one at a time, after the head: a tree of every coordinate
+    // would take about 150 bytes a vertex, 250 MB for a 100 M-point scan's curves.)
+    let head = serde_json::to_string(&Value::Object(head)).map_err(|e| Error::output(path, std::io::Error::from(e)))?;
+    let io = |e: std::io::Error| Error::output(path, e);
+    // (The head always has its type: it ends `"...}`, and the features go before the `}`.)
+    w.write_all(&head.as_bytes()[..head.len() - 1]).map_err(io)?;
+    w.write_all(b",\"features\":[").map_err(io)?;
+    for (k, c) in curves.iter().enumerate() {
+        let mut coords: Vec<[f64; 3]> = c.vertices.iter().map(|v| v.p.to_array()).collect();
+        if c.closed && !coords.is_empty() {
+            coords.push(coords[0]);
+        }
+        let [start, end] = c.end_kinds();
+        // (Scalar properties only: Shapefile and FlatGeobuf drop or refuse lists.)
+        let feature = json!({
+            "type": "Feature",
+            "properties": {
+                "id": c.id, "closed": c.closed, "length": c.length(), "confidence": c.confidence,
+                "angle": c.mean_normal_angle(), "start": start, "end": end, "corners": c.corner_list(),
+            },
+            "geometry": {"type": "LineString", "coordinates": coords},
+        });
+        if k > 0 {
+            w.write_all(b",").map_err(io)?;
+        }
+        serde_json::to_writer(&mut w, &feature).map_err(|e| io(std::io::Error::from(e)))?;
+    }
+    w.write_all(b"]}").and_then(|_| w.flush()).map_err(io)
 }

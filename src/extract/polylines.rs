@@ -15,6 +15,7 @@ use crate::curves::{Polyline, Vertex};
 use crate::keys::{bits_key, snap, snap_quantum};
 use crate::spatial::Index;
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Snaps an edge point's position to quantum `q` and its normals to a millionth.
 pub fn snap_edge(e: &mut WorldEdge, q: f64) {
@@ -77,7 +78,7 @@ impl SmoothedEdges {
     pub fn sort(&mut self) {
         let (p, n) = (&self.points, &self.normals);
         let mut perm: Vec<u32> = (0..p.len() as u32).collect();
-        perm.sort_unstable_by(|&a, &b| {
+        perm.par_sort_unstable_by(|&a, &b| {
             let (a, b) = (a as usize, b as usize);
             bits_key(p[a]).cmp(&bits_key(p[b])).then(normal_key(&n[a]).cmp(&normal_key(&n[b])))
         });
@@ -201,32 +202,50 @@ pub fn places(v: &[DVec3], closed: bool, step: f64) -> Vec<DVec3> {
     places
 }
 
-/// A curve's vertex normals and the agreement at each of its [`places`], as looked up in the
-/// edge cloud region by region, made into the output polyline `id` (world coordinates, from
-/// positions relative to `origin`): the normals' orientation is carried along the curve, and
-/// vertices without normals take their neighbours'.
-pub fn finish(id: u32, c: &complete::Curve, normals: &[Option<[DVec3; 2]>], agreement: &[Option<f64>], origin: DVec3, step: f64) -> Polyline {
+/// What the smoothed edge points say along a curve, gathered region by region: the mean normal
+/// pair near each vertex (zero where none is known), and over the [`places`] along it, how many
+/// have edge points near and how well those agree (summed).
+#[derive(Clone, Debug, Default)]
+pub struct Gathered {
+    /// Per vertex, the mean normal pair of the edge points within half a step.
+    pub normals: Vec<[glam::Vec3; 2]>,
+    /// Places with edge points near.
+    pub covered: u32,
+    /// Their agreement, summed.
+    pub agreement: f64,
+}
+
+impl Gathered {
+    /// Nothing gathered yet, for a curve of `n` vertices.
+    pub fn new(n: usize) -> Gathered {
+        Gathered { normals: vec![[glam::Vec3::ZERO; 2]; n], covered: 0, agreement: 0.0 }
+    }
+}
+
+/// The curve `c` with what was gathered along it, made into the output polyline `id` (world
+/// coordinates, from positions relative to `origin`): the normals' orientation is carried along
+/// the curve, vertices without normals take their neighbours', and the evidence gives the
+/// confidence.
+pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
     let mut prev: Option<[DVec3; 2]> = None;
     let mut n: Vec<[DVec3; 2]> = vec![[DVec3::ZERO; 2]; c.v.len()];
-    for (i, m) in normals.iter().enumerate() {
-        if let (Some(m), false) = (m, c.corner[i]) {
-            let m = prev.map_or(*m, |p| align(*m, p));
+    for (i, m) in g.normals.iter().enumerate() {
+        if m[0] != glam::Vec3::ZERO && !c.corner[i] {
+            let m = m.map(|x| x.as_dvec3());
+            let m = prev.map_or(m, |p| align(m, p));
             n[i] = m;
             prev = Some(m);
         }
     }
     fill_from_neighbours(&mut n);
-    let vertices = c.v.iter().zip(&n).zip(&c.corner).map(|((&p, n), &corner)| Vertex { p: p + origin, n: [n[0].as_vec3(), n[1].as_vec3()], corner }).collect();
-    let mut line = Polyline { id, closed: c.closed, vertices, confidence: 0.0 };
-    let covered: Vec<f64> = agreement.iter().flatten().copied().collect();
     let length = c.v.windows(2).map(|w| w[0].distance(w[1])).sum::<f64>() + if c.closed && c.v.len() > 2 { c.v[0].distance(c.v[c.v.len() - 1]) } else { 0.0 };
     let evidence = Evidence {
         length_steps: length / step,
-        coverage: covered.len() as f64 / agreement.len().max(1) as f64,
-        agreement: covered.iter().sum::<f64>() / covered.len().max(1) as f64,
+        coverage: g.covered as f64 / places(&c.v, c.closed, step).len().max(1) as f64,
+        agreement: g.agreement / g.covered.max(1) as f64,
     };
-    line.confidence = evidence.confidence() as f32;
-    line
+    let vertices = c.v.iter().zip(&n).zip(&c.corner).map(|((&p, n), &corner)| Vertex { p: p + origin, n: [n[0].as_vec3(), n[1].as_vec3()], corner }).collect();
+    Polyline { id, closed: c.closed, vertices, confidence: evidence.confidence() as f32 }
 }
 
 /// Gives each vertex without normals (corners, and vertices with no edge point near) those of

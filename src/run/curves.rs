@@ -7,7 +7,7 @@ use super::Run;
 use crate::curves::Polyline;
 use crate::error::Result;
 use crate::extract::blocks::{self, in_box, Blocks, Census, Layers, Piece};
-use crate::extract::polylines::{self, NearEdges, SmoothedEdges};
+use crate::extract::polylines::{self, Gathered, NearEdges, SmoothedEdges};
 use crate::extract::{complete, stitch, Counts, Resolved, Timings, WorldEdge};
 use crate::keys::snap_quantum;
 use glam::DVec3;
@@ -28,9 +28,6 @@ struct Survey {
     /// The origin of the curve stage's positions, and of the blocks' grid.
     origin: DVec3,
 }
-
-/// Positions to look up in a block: (curve, vertex or place, position).
-type Lookups = Vec<(u32, u32, DVec3)>;
 
 impl Run<'_> {
     /// Stages 3-5, as the method runs them, a block at a time where they are local:
@@ -58,7 +55,7 @@ impl Run<'_> {
         let tc = Instant::now();
         let curves = polylines::complete_lines(lines, &grouped, r, &self.opts.cancel);
         self.opts.cancel.check()?;
-        let traced = self.attribute(&curves, &blocks, origin, r)?;
+        let traced = self.attribute(curves, &blocks, origin, r)?;
         seconds.completion = tc.elapsed().as_secs_f64();
         let all = traced.len();
         let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
@@ -228,28 +225,21 @@ impl Run<'_> {
     /// time: each vertex and each place along a curve is looked up in the block that holds it
     /// (or, off every block, the one it is within a step of), with the smoothed edge points
     /// within a step and a half of that block.
-    fn attribute(&self, curves: &[complete::Curve], blocks: &Blocks, origin: DVec3, r: &Resolved) -> Result<Vec<Polyline>> {
+    fn attribute(&self, curves: Vec<complete::Curve>, blocks: &Blocks, origin: DVec3, r: &Resolved) -> Result<Vec<Polyline>> {
         let step = r.step;
-        let places: Vec<Vec<DVec3>> = curves.iter().map(|c| polylines::places(&c.v, c.closed, step)).collect();
-        // What each block is asked: vertices, then places.
-        let mut asked: Vec<(Lookups, Lookups)> = vec![Default::default(); blocks.list.len()];
+        // The curves each block may hold a vertex or place of.
+        let mut meets: Vec<Vec<u32>> = vec![vec![]; blocks.list.len()];
         for (c, curve) in curves.iter().enumerate() {
-            for (i, &p) in curve.v.iter().enumerate() {
-                if let (false, Some(b)) = (curve.corner[i], blocks.find(p, step)) {
-                    asked[b as usize].0.push((c as u32, i as u32, p));
-                }
-            }
-            for (k, &p) in places[c].iter().enumerate() {
-                if let Some(b) = blocks.find(p, step) {
-                    asked[b as usize].1.push((c as u32, k as u32, p));
-                }
+            let lo = curve.v.iter().copied().reduce(DVec3::min).unwrap_or_default() - DVec3::splat(step);
+            let hi = curve.v.iter().copied().reduce(DVec3::max).unwrap_or_default() + DVec3::splat(step);
+            for b in blocks.meeting(lo, hi) {
+                meets[b as usize].push(c as u32);
             }
         }
+        let mut gathered: Vec<Gathered> = curves.iter().map(|c| Gathered::new(c.v.len())).collect();
         let mut smoothed = Recent::new(self.opts.memory / 16 / 48);
-        let mut normals: Vec<Vec<Option<[DVec3; 2]>>> = curves.iter().map(|c| vec![None; c.v.len()]).collect();
-        let mut agreement: Vec<Vec<Option<f64>>> = places.iter().map(|p| vec![None; p.len()]).collect();
-        for (b, (vertices, at)) in asked.into_iter().enumerate() {
-            if vertices.is_empty() && at.is_empty() {
+        for (b, ids) in meets.into_iter().enumerate() {
+            if ids.is_empty() {
                 continue;
             }
             let region = blocks.list[b].around(1.5 * step);
@@ -264,17 +254,30 @@ impl Run<'_> {
             }
             near.sort();
             let edges = NearEdges::new(&near.points, &near.normals, step);
-            let found: Vec<_> = vertices.par_iter().map(|&(_, _, p)| edges.normals_at(p)).collect();
-            for (&(c, i, _), n) in vertices.iter().zip(found) {
-                normals[c as usize][i as usize] = n;
-            }
-            let found: Vec<_> = at.par_iter().map(|&(_, _, p)| edges.agreement_at(p)).collect();
-            for (&(c, k, _), a) in at.iter().zip(found) {
-                agreement[c as usize][k as usize] = a;
+            let held = blocks.list[b].around(step);
+            let here = |p: DVec3| in_box(held, p) && blocks.find(p, step) == Some(b as u32);
+            let found: Vec<_> = ids
+                .par_iter()
+                .map(|&c| {
+                    let curve = &curves[c as usize];
+                    let normals: Vec<(usize, [DVec3; 2])> =
+                        (0..curve.v.len()).filter(|&i| !curve.corner[i] && here(curve.v[i])).filter_map(|i| Some((i, edges.normals_at(curve.v[i])?))).collect();
+                    let agreement: Vec<f64> =
+                        polylines::places(&curve.v, curve.closed, step).into_iter().filter(|&p| here(p)).filter_map(|p| edges.agreement_at(p)).collect();
+                    (normals, agreement)
+                })
+                .collect();
+            for (&c, (normals, agreement)) in ids.iter().zip(found) {
+                let g = &mut gathered[c as usize];
+                for (i, m) in normals {
+                    g.normals[i] = m.map(|x| x.as_vec3());
+                }
+                g.covered += agreement.len() as u32;
+                g.agreement += agreement.iter().sum::<f64>();
             }
             self.opts.cancel.check()?;
         }
-        Ok(curves.iter().enumerate().map(|(id, c)| polylines::finish(id as u32, c, &normals[id], &agreement[id], origin, step)).collect())
+        Ok(curves.into_iter().zip(gathered).enumerate().map(|(id, (c, g))| polylines::finish(id as u32, c, g, origin, step)).collect())
     }
 }
 
