@@ -195,6 +195,10 @@ mod tests {
         let res = TileResiduals { gid: vec![5, 9], residual: vec![Residual { value: 0.5, crease: true }, Residual { value: 0.25, crease: false }] };
         write(&ws, 4, &Residuals(res.clone())).unwrap();
         assert_eq!(read::<Residuals>(&ws, 4).unwrap().0, res);
+        let smoothed = SmoothedEdges { points: vec![DVec3::new(0.5, -2.0, 1e7)], normals: vec![[Vec3::Z, Vec3::X]], unconfirmed: 3 };
+        write(&ws, 2, &Smoothed(smoothed.clone())).unwrap();
+        let back = read::<Smoothed>(&ws, 2).unwrap().0;
+        assert_eq!((back.points, back.normals, back.unconfirmed), (smoothed.points, smoothed.normals, smoothed.unconfirmed));
         // A residual record where an edge record belongs, and a missing one, are named.
         ws.write_atomic(&name(Edges::DIR, 5), &ws.read(&name(Residuals::DIR, 4)).unwrap().unwrap()).unwrap();
         let e = read::<Edges>(&ws, 5).err().unwrap().to_string();
