@@ -11,6 +11,13 @@ use super::blocks::Piece;
 use glam::DVec3;
 use std::collections::HashMap;
 
+/// Crossings of two pieces this close, in polyline steps, may be paired. (Both sides' traces
+/// follow the same smoothed edge points, so their crossings lie a small part of a step apart;
+/// a parallel crease is rarely as close.)
+pub const JOIN_STEPS: f64 = 0.5;
+/// Joined end vertices this close, in steps, become one.
+pub const MERGE_STEPS: f64 = 0.25;
+
 /// A stitched polyline: its vertices, and whether it is closed.
 pub type Line = (Vec<DVec3>, bool);
 

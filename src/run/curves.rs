@@ -45,7 +45,7 @@ impl Run<'_> {
         let Survey { mut counts, boxes, blocks, grouped, origin } = self.survey(r)?;
         let mut seconds = Timings { candidates: self.pass.residuals, projection: self.pass.projection, index: self.pass.statistics, ..Default::default() };
         let pieces = self.grow_blocks(&boxes, &blocks, &grouped, origin, r, &mut counts, &mut seconds)?;
-        let lines = stitch::stitch(pieces, 0.5 * r.step, 0.25 * r.step);
+        let lines = stitch::stitch(pieces, stitch::JOIN_STEPS * r.step, stitch::MERGE_STEPS * r.step);
         counts.grown = lines.len() as u64;
         if self.opts.debug.on() {
             let pl: Vec<Polyline> = lines.iter().enumerate().map(|(i, l)| Polyline::from_points(i as u32, l.0.iter().map(|p| *p + origin))).collect();
