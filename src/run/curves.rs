@@ -158,8 +158,11 @@ impl Run<'_> {
         let bar = self.progress.bar("curves", blocks.list.len() as u64, "blocks");
         // (Neighbouring blocks read the same tiles: the last few decoded are kept.)
         let mut tiles = Recent::new(self.opts.memory / 16 / 48);
-        for (b, block) in blocks.list.iter().enumerate() {
+        // Stage 3 for block b: its smoothed, confirmed core and halo, its own edge points as
+        // read (for the debug dump), and the seconds taken.
+        let mut smooth = |b: usize| -> Result<(SmoothedEdges, Vec<DVec3>, Vec<DVec3>, f64)> {
             let t = Instant::now();
+            let block = &blocks.list[b];
             let region = block.around(reach);
             let near: Vec<u32> = boxes.iter().filter(|&&(_, lo, hi)| lo.cmple(region.1).all() && hi.cmpge(region.0).all()).map(|x| x.0).collect();
             let edges = tiles.get(&near, |u| Ok(self.stored_edges(u, q)?.edges))?;
@@ -183,9 +186,6 @@ impl Run<'_> {
             for s in [&mut own, &mut around, &mut context] {
                 s.sort();
             }
-            if self.opts.debug.on() {
-                debug_edges.extend_from_slice(&own.points);
-            }
             let (n_own, n_around) = (own.points.len(), around.points.len());
             let points: Vec<DVec3> = own.points.iter().chain(&around.points).chain(&context.points).copied().collect();
             let normals: Vec<[glam::Vec3; 2]> = own.normals.iter().chain(&around.normals).chain(&context.normals).copied().collect();
@@ -203,17 +203,40 @@ impl Run<'_> {
             }
             core.sort();
             halo_points.sort();
-            counts.unconfirmed += core.unconfirmed;
-            if self.opts.debug.on() {
-                debug_smoothed.extend_from_slice(&core.points);
+            let raw = if self.opts.debug.on() { own.points } else { vec![] };
+            Ok((core, halo_points.points, raw, t.elapsed().as_secs_f64()))
+        };
+        // Stage 4 for a smoothed block, and the seconds taken.
+        let grow = |pending: &Option<(u32, SmoothedEdges, Vec<DVec3>)>| match pending {
+            Some((b, core, halo)) => {
+                let t = Instant::now();
+                let grown: Vec<(u32, Piece)> =
+                    polylines::grow_block(&core.points, halo, blocks, *b, r, &self.opts.cancel).into_iter().map(|p| (*b, p)).collect();
+                (grown, t.elapsed().as_secs_f64())
             }
-            seconds.smoothing += t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            pieces.extend(polylines::grow_block(&core.points, &halo_points.points, blocks, b as u32, r, &self.opts.cancel).into_iter().map(|p| (b as u32, p)));
+            None => (vec![], 0.0),
+        };
+        // (Growing is serial within a block: the next block is smoothed meanwhile.)
+        let mut pending: Option<(u32, SmoothedEdges, Vec<DVec3>)> = None;
+        for b in 0..=blocks.list.len() {
+            let ((grown, growing), next) = rayon::join(|| grow(&pending), || (b < blocks.list.len()).then(|| smooth(b)));
+            pieces.extend(grown);
+            seconds.growing += growing;
             self.opts.cancel.check()?;
-            records::write(&self.ws, b as u32, &Smoothed(core))?;
-            seconds.growing += t.elapsed().as_secs_f64();
-            bar.inc(1);
+            if let Some((done, core, _)) = pending.take() {
+                records::write(&self.ws, done, &Smoothed(core))?;
+                bar.inc(1);
+            }
+            if let Some(next) = next {
+                let (core, halo_points, raw, secs) = next?;
+                counts.unconfirmed += core.unconfirmed;
+                seconds.smoothing += secs;
+                if self.opts.debug.on() {
+                    debug_edges.extend(raw);
+                    debug_smoothed.extend_from_slice(&core.points);
+                }
+                pending = Some((b as u32, core, halo_points));
+            }
         }
         bar.finish();
         self.opts.debug.points("edges.obj", &debug_edges, origin);
