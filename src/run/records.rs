@@ -115,6 +115,16 @@ fn vec3(r: &mut Reader) -> Result<Vec3> {
     Ok(Vec3::new(r.f32()?, r.f32()?, r.f32()?))
 }
 
+/// An edge point as stored: its position (f64) and its two normals (f32), 48 bytes.
+fn put_edge(w: &mut Writer, p: DVec3, n: &[Vec3; 2]) {
+    p.to_array().iter().for_each(|&x| w.f64(x));
+    n.iter().flat_map(|n| n.to_array()).for_each(|x| w.f32(x));
+}
+
+fn get_edge(r: &mut Reader) -> Result<(DVec3, [Vec3; 2])> {
+    Ok((dvec3(r)?, [vec3(r)?, vec3(r)?]))
+}
+
 impl Record for Edges {
     const KIND: [u8; 4] = *b"EDGE";
     const DIR: &'static str = "edges";
@@ -126,8 +136,7 @@ impl Record for Edges {
         w.u64(t.scattered);
         w.u64(t.edges.len() as u64);
         for e in &t.edges {
-            e.p.to_array().iter().for_each(|&x| w.f64(x));
-            e.n.iter().flat_map(|n| n.to_array()).for_each(|x| w.f32(x));
+            put_edge(w, e.p, &e.n);
         }
         w.u64(t.corners.len() as u64);
         for c in &t.corners {
@@ -139,7 +148,7 @@ impl Record for Edges {
     fn decode(r: &mut Reader) -> Result<Self> {
         let (candidates, one_surface, scattered) = (r.u64()?, r.u64()?, r.u64()?);
         let n = r.count(48)?;
-        let edges = (0..n).map(|_| Ok(WorldEdge { p: dvec3(r)?, n: [vec3(r)?, vec3(r)?] })).collect::<Result<_>>()?;
+        let edges = (0..n).map(|_| get_edge(r).map(|(p, n)| WorldEdge { p, n })).collect::<Result<_>>()?;
         let n = r.count(32)?;
         let corners = (0..n).map(|_| Ok(WorldCorner { p: dvec3(r)?, w: r.f64()? })).collect::<Result<_>>()?;
         Ok(Edges(TileEdges { edges, corners, candidates, one_surface, scattered }))
@@ -159,8 +168,7 @@ impl Record for Smoothed {
         w.u64(s.unconfirmed);
         w.u64(s.points.len() as u64);
         for (p, n) in s.points.iter().zip(&s.normals) {
-            p.to_array().iter().for_each(|&x| w.f64(x));
-            n.iter().flat_map(|n| n.to_array()).for_each(|x| w.f32(x));
+            put_edge(w, *p, n);
         }
     }
 
@@ -169,8 +177,9 @@ impl Record for Smoothed {
         let n = r.count(48)?;
         let mut s = SmoothedEdges { unconfirmed, points: Vec::with_capacity(n), normals: Vec::with_capacity(n) };
         for _ in 0..n {
-            s.points.push(dvec3(r)?);
-            s.normals.push([vec3(r)?, vec3(r)?]);
+            let (p, n) = get_edge(r)?;
+            s.points.push(p);
+            s.normals.push(n);
         }
         Ok(Smoothed(s))
     }
