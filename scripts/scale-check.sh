@@ -16,8 +16,8 @@ sizes=${2:-10000000 100000000}
 mem=${3:-512M}
 noise=${4:-0.01}
 mkdir -p "$work"
-echo "| points | edge points | blocks | peak RSS | tile passes | curve stage | seconds | curve stage s | recall | precision |"
-echo "|---|---|---|---|---|---|---|---|---|---|"
+echo "| points | edge points | blocks | vertices | peak RSS | tile passes | curve stage | seconds | curve stage s | recall | precision |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|"
 for n in $sizes; do
   las=$work/scene_${n}_$noise.las
   [ -f "$las" ] || "$bin" synth scene -n "$n" --noise "$noise" --clutter -o "$las" > /dev/null
@@ -26,11 +26,12 @@ for n in $sizes; do
   "$bin" extract "$las" -o "$out" --memory "$mem" -q
   # Truth tolerance 0.1 m (the scene is in metres; --diag 10 makes --tol 0.01 mean 10 cm).
   "$bin" eval --truth "${las%.las}.truth.obj" --curves "$out/curves.obj" --diag 10 --json > "$work/eval_$n.json"
-  python3 - "$out/report.json" "$work/eval_$n.json" <<'PY'
+  python3 - "$out/report.json" "$work/eval_$n.json" "$out/curves.obj" <<'PY'
 import json, sys
 r, e = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
 c, mb = r["counts"], lambda k: f"{r[k] / 1e6:.0f} MB"
-print(f"| {c['points']:,} | {c['edge_points']:,} | {c['blocks']} | {mb('peak_rss_bytes')} | {mb('peak_rss_tiles_bytes')} "
+vertices = sum(1 for line in open(sys.argv[3]) if line.startswith("v "))
+print(f"| {c['points']:,} | {c['edge_points']:,} | {c['blocks']} | {vertices:,} | {mb('peak_rss_bytes')} | {mb('peak_rss_tiles_bytes')} "
       f"| {mb('peak_rss_curves_bytes')} | {r['total_seconds']:.0f} | {r['pass_seconds']['curves']:.1f} "
       f"| {e['recall']:.4f} | {e['precision']:.4f} |")
 PY

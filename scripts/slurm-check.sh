@@ -51,7 +51,7 @@ t1=$(date +%s.%N)
 # (Small tiles, so that each worker has a share of several.)
 "$bin" slurm "$cloud" -o "$work/chained" -q --tile-size 20 --tasks "$tasks" --submit -- --mem=3G
 for _ in $(seq 1800); do
-  [ -z "$(squeue -h -n crease-plan,crease-statistics,crease-residuals,crease-projection,crease-curves)" ] && break
+  [ -z "$(squeue -h -n crease-plan,crease-statistics,crease-residuals,crease-projection,crease-growing,crease-curves)" ] && break
   sleep 1
 done
 t2=$(date +%s.%N)

@@ -127,7 +127,8 @@ enum Cmd {
     /// Extracts feature curves; writes curves.obj, curves.ply, curves.geojson and report.json.
     Extract(ExtractArgs),
     /// Writes RUN/slurm/: an extraction as a chain of Slurm jobs (plan and bucketing, one
-    /// array job per tile pass, then the curves), each after the one before, over a run
+    /// array job per tile pass, one growing the curves' blocks, then the stitching and
+    /// outputs), each after the one before, over a run
     /// directory on a file system every node shares; with --submit, submits it. Takes the
     /// arguments of extract; those after -- become #SBATCH options of every job.
     Slurm(SlurmArgs),

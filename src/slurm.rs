@@ -4,7 +4,10 @@
 //! The chain, each job `afterok` the one before:
 //! 1. `plan`: worker 0 plans the run and buckets the points (one task);
 //! 2. `statistics`, `residuals`, `projection`: arrays of N tasks, task I running worker I/N;
-//! 3. `curves`: worker 0 grows the curves and writes the outputs (one task).
+//! 3. `growing`: an array of N tasks, each smoothing and growing its share of the curve
+//!    stage's growth blocks;
+//! 4. `curves`: worker 0 stitches the blocks' pieces, completes the curves and writes the
+//!    outputs (one task).
 //!
 //! Every job runs the same `crease extract` command, with the same arguments, but for
 //! `--worker`: each invocation does what is left of its share and goes as far as the others
@@ -14,7 +17,7 @@ use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// The jobs of the chain, in order: name, and whether it is an array of all the workers.
-pub const JOBS: [(&str, bool); 5] = [("plan", false), ("statistics", true), ("residuals", true), ("projection", true), ("curves", false)];
+pub const JOBS: [(&str, bool); 6] = [("plan", false), ("statistics", true), ("residuals", true), ("projection", true), ("growing", true), ("curves", false)];
 
 /// What the chain runs.
 #[derive(Clone, Debug)]
@@ -33,7 +36,7 @@ pub struct Chain {
     pub sbatch_args: Vec<String>,
 }
 
-/// Writes the chain's batch scripts to `RUN/slurm/` (`1-plan.sbatch` to `5-curves.sbatch`)
+/// Writes the chain's batch scripts to `RUN/slurm/` (`1-plan.sbatch` to `6-curves.sbatch`)
 /// and `submit.sh`, which submits them in order with their dependencies and prints the job
 /// ids. Returns the paths of the scripts, in order.
 ///
@@ -49,7 +52,7 @@ pub struct Chain {
 ///     sbatch_args: vec!["--time=2:00:00".into()],
 /// };
 /// let scripts = write_chain(&chain)?;
-/// assert_eq!(scripts.len(), 5);
+/// assert_eq!(scripts.len(), 6);
 /// assert!(std::fs::read_to_string(&scripts[1])?.contains("#SBATCH --array=0-7"));
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```

@@ -11,7 +11,7 @@ fn crease(args: &[impl AsRef<std::ffi::OsStr>]) -> std::process::Output {
 
 /// The arguments every run of the fandisk fixture here shares: tiles of 0.4 units, 47 tiles
 /// with points, so that each worker has a share of many.
-const COMMON: [&str; 3] = ["-q", "--tile-size", "0.4"];
+const COMMON: [&str; 5] = ["-q", "--tile-size", "0.4", "--block-steps", "16"];
 
 /// The fandisk fixture, and the curves one `crease extract` of it writes (into `dir/plain`).
 fn fandisk_and_its_curves(dir: &Path) -> (String, Vec<u8>) {
@@ -100,7 +100,7 @@ fn the_slurm_chain_run_in_order_writes_the_curves_of_one_run() {
     let out = crease(&[&["slurm", input, "-o", chained.to_str().unwrap(), "--tasks", "3"][..], &COMMON, &["--", "--time=5:00"]].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let scripts: Vec<String> = String::from_utf8_lossy(&out.stdout).lines().map(String::from).collect();
-    assert_eq!(scripts.len(), 5);
+    assert_eq!(scripts.len(), 6);
     for s in &scripts {
         let text = std::fs::read_to_string(s).unwrap();
         assert!(text.contains("#SBATCH --time=5:00") && !text.contains("--tasks"), "{text}");
@@ -117,7 +117,7 @@ fn the_slurm_chain_run_in_order_writes_the_curves_of_one_run() {
     }
     assert_eq!(std::fs::read(chained.join("curves.obj")).unwrap(), plain);
     let submit = std::fs::read_to_string(chained.join("slurm/submit.sh")).unwrap();
-    assert_eq!(submit.matches("--dependency=afterok:$prev").count(), 5);
+    assert_eq!(submit.matches("--dependency=afterok:$prev").count(), 6);
     // Flags that would break a chain are refused, and so is an argument the scripts cannot
     // hold (not UTF-8), with a message rather than a panic.
     let out = crease(&["slurm", input, "-o", chained.to_str().unwrap(), "--force"]);

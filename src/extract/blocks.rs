@@ -163,31 +163,25 @@ pub struct Blocks {
 /// assert!(blocks.list[0].contains(DVec3::new(1.0, 2.0, 3.0)));
 /// ```
 pub fn plan(census: &Census) -> Blocks {
-    let base = census.fine * (1u64 << MAX_SPLITS) as f64;
     let mut cells: BTreeMap<[i64; 3], Vec<([i64; 3], u64)>> = BTreeMap::new();
     for (&c, &n) in &census.counts {
         cells.entry(c.map(|x| x.div_euclid(1 << MAX_SPLITS))).or_default().push((c, n));
     }
-    let mut out = Blocks { base, fine: census.fine, ..Default::default() };
+    let mut spans = vec![];
     for (b, mut fine) in cells {
         fine.sort_unstable();
-        let first = out.list.len() as u32;
-        split(0, b, &fine, base, &mut out.list);
-        out.by_base.insert(b, (first..out.list.len() as u32).collect());
+        split(0, b, &fine, &mut spans);
     }
-    out
+    Blocks::from_cells(census.fine, spans)
 }
 
-/// Splits the cell `c` of split level `level` (side `base / 2^level`) holding the fine cells
-/// `fine` (sorted) into blocks.
-fn split(level: u32, c: [i64; 3], fine: &[([i64; 3], u64)], base: f64, out: &mut Vec<Block>) {
+/// Splits the cell `c` of split level `level` holding the fine cells `fine` (sorted) into
+/// blocks, given by the census cells they cover.
+fn split(level: u32, c: [i64; 3], fine: &[([i64; 3], u64)], out: &mut Vec<[[i64; 3]; 2]>) {
     let total: u64 = fine.iter().map(|f| f.1).sum();
     if total <= MAX_EDGE_POINTS || level == MAX_SPLITS {
-        let side = base / (1u64 << level) as f64;
-        let lo = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * side;
-        let hi = DVec3::new((c[0] + 1) as f64, (c[1] + 1) as f64, (c[2] + 1) as f64) * side;
         let span = 1i64 << (MAX_SPLITS - level);
-        out.push(Block { lo, hi, cells: [c.map(|x| x * span), c.map(|x| (x + 1) * span)] });
+        out.push([c.map(|x| x * span), c.map(|x| (x + 1) * span)]);
         return;
     }
     let shift = MAX_SPLITS - level - 1;
@@ -196,11 +190,29 @@ fn split(level: u32, c: [i64; 3], fine: &[([i64; 3], u64)], base: f64, out: &mut
         children.entry(f.map(|x| x >> shift)).or_default().push((f, n));
     }
     for (child, fine) in children {
-        split(level + 1, child, &fine, base, out);
+        split(level + 1, child, &fine, out);
     }
 }
 
 impl Blocks {
+    /// The blocks covering the census cells (of side `fine`) `cells`, each `[low, high)` along
+    /// each axis, in that order: the inverse of [`Blocks::cells`].
+    pub fn from_cells(fine: f64, cells: Vec<[[i64; 3]; 2]>) -> Blocks {
+        let corner = |c: [i64; 3]| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * fine;
+        let mut out = Blocks { base: fine * (1u64 << MAX_SPLITS) as f64, fine, ..Default::default() };
+        for (k, c) in cells.into_iter().enumerate() {
+            out.by_base.entry(c[0].map(|x| x.div_euclid(1 << MAX_SPLITS))).or_default().push(k as u32);
+            out.list.push(Block { lo: corner(c[0]), hi: corner(c[1]), cells: c });
+        }
+        out
+    }
+
+    /// The side of the census cells and the cells each block covers: what
+    /// [`Blocks::from_cells`] rebuilds the same blocks from.
+    pub fn cells(&self) -> (f64, Vec<[[i64; 3]; 2]>) {
+        (self.fine, self.list.iter().map(|b| b.cells).collect())
+    }
+
     /// The block that owns the edge point at `p`: the one whose census cells hold it. (Every
     /// edge point counted in the census has one, whatever the rounding of the blocks' boxes.)
     pub fn owner(&self, p: DVec3) -> Option<u32> {

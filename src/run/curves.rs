@@ -2,10 +2,10 @@
 //! the size of the edge cloud: the edge cloud is taken a growth block at a time (see
 //! [`crate::extract::blocks`]), and only the polylines are whole.
 
-use super::records::{self, Record, Smoothed};
-use super::Run;
+use super::records::{self, Pieces, Record, Smoothed};
+use super::{Run, Worker};
 use crate::curves::Polyline;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::extract::blocks::{self, in_box, Blocks, Census, Layers, Piece};
 use crate::extract::polylines::{self, Gathered, NearEdges, SmoothedEdges};
 use crate::extract::{complete, stitch, Counts, Resolved, Timings, WorldEdge};
@@ -18,15 +18,22 @@ use std::time::Instant;
 /// the origin).
 type TileBox = (u32, DVec3, DVec3);
 
+/// Every block's pieces, each with its block's number, and the edge points the consensus
+/// filter dropped in all.
+type Grown = (Vec<(u32, Piece)>, u64);
+
 /// What the survey of the edge points found (see [`Run::survey`]).
-struct Survey {
-    counts: Counts,
-    boxes: Vec<TileBox>,
-    blocks: Blocks,
-    /// Grouped corners, relative to the origin.
-    grouped: Vec<DVec3>,
+pub(super) struct Survey {
+    /// Side of the base blocks planned.
+    pub(super) side: f64,
     /// The origin of the curve stage's positions, and of the blocks' grid.
-    origin: DVec3,
+    pub(super) origin: DVec3,
+    /// The counts of stages 1 and 2.
+    pub(super) counts: Counts,
+    pub(super) boxes: Vec<TileBox>,
+    pub(super) blocks: Blocks,
+    /// Grouped corners, relative to the origin.
+    pub(super) grouped: Vec<DVec3>,
 }
 
 impl Run<'_> {
@@ -34,17 +41,35 @@ impl Run<'_> {
     /// 1. survey the edge points: counts, corners (grouped over the whole cloud), and the
     ///    growth blocks;
     /// 2. per block: smoothing and the consensus filter (stage 3), then growing (stage 4) from
-    ///    the block's core, cut at its border;
+    ///    the block's core, cut at its border; each block's pieces are kept in the working data
+    ///    (a worker grows its share of the blocks);
     /// 3. the stitcher joins the pieces across the borders;
     /// 4. completion (stage 5) on the stitched polylines;
     /// 5. per block again: the curves' normals and evidence from the smoothed edge points.
-    pub(super) fn curves(&mut self, r: &Resolved) -> Result<(Vec<Polyline>, Counts, Timings)> {
+    ///
+    /// None if this process is a worker whose share is done but whose run is not (see
+    /// [`Run::waiting`]).
+    pub(super) fn curves(&mut self, r: &Resolved) -> Result<Option<(Vec<Polyline>, Counts, Timings)>> {
         let t = Instant::now();
         crate::mem::release_free_memory();
         self.curve_peak = Some(crate::mem::PeakSampler::start());
-        let Survey { mut counts, boxes, blocks, grouped, origin } = self.survey(r)?;
+        let survey = self.survey(r)?;
         let mut seconds = Timings { candidates: self.pass.residuals, projection: self.pass.projection, index: self.pass.statistics, ..Default::default() };
-        let pieces = self.grow_blocks(&boxes, &blocks, &grouped, origin, r, &mut counts, &mut seconds)?;
+        self.grow_blocks(&survey, r, &mut seconds)?;
+        if !Worker::leads(self.worker) {
+            self.waiting = Some("the curves and outputs (worker 0 writes them)".into());
+            return Ok(None);
+        }
+        let Some((pieces, unconfirmed)) = self.all_pieces(&survey)? else { return Ok(None) };
+        let Survey { counts, blocks, grouped, origin, .. } = survey;
+        let mut counts = Counts {
+            points: self.manifest.tile_points.iter().sum(),
+            evaluated: self.evaluated,
+            corners: grouped.len() as u64,
+            blocks: blocks.list.len() as u64,
+            unconfirmed,
+            ..counts
+        };
         let lines = stitch::stitch(pieces, stitch::JOIN_STEPS * r.step, stitch::MERGE_STEPS * r.step);
         counts.grown = lines.len() as u64;
         if self.opts.debug.on() {
@@ -62,7 +87,7 @@ impl Run<'_> {
         let curves: Vec<Polyline> = traced.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
         (counts.curves, counts.left_out) = (curves.len() as u64, (all - curves.len()) as u64);
         self.pass.curves = t.elapsed().as_secs_f64();
-        Ok((curves, counts, seconds))
+        Ok(Some((curves, counts, seconds)))
     }
 
     /// A tile's edge points, snapped, with its corners and counts.
@@ -74,15 +99,32 @@ impl Run<'_> {
         Ok(e)
     }
 
+    /// The survey of the edge points: as kept by an earlier invocation (or by worker 0), else
+    /// made from the tiles (and kept, by the process that writes the run's shared files).
+    fn survey(&self, r: &Resolved) -> Result<Survey> {
+        let side = self.opts.block_steps * r.step;
+        // (A damaged survey, or one of blocks of another side, is made again.)
+        if let Ok(kept) = records::read::<Survey>(&self.ws, 0) {
+            if kept.side == side {
+                return Ok(kept);
+            }
+        }
+        let survey = self.survey_edges(r, side)?;
+        if Worker::leads(self.worker) {
+            self.ws.create_dir(Survey::DIR)?;
+            records::write(&self.ws, 0, &survey)?;
+        }
+        Ok(survey)
+    }
+
     /// Reads every tile's edge points: the counts of stages 1-2, the corners (grouped), where
     /// the blocks' borders go (see [`Layers`]), then, relative to the origin so found, the
-    /// bounds of each tile's edge points and the growth blocks.
-    fn survey(&self, r: &Resolved) -> Result<Survey> {
+    /// bounds of each tile's edge points and the growth blocks of side `side`.
+    fn survey_edges(&self, r: &Resolved, side: f64) -> Result<Survey> {
         let q = snap_quantum(r.kappa);
         let anchor = DVec3::from(self.manifest.grid.origin);
-        let side = self.opts.block_steps * r.step;
         let cell = Census::new(side).cell_side();
-        let mut counts = Counts { points: self.manifest.tile_points.iter().sum(), evaluated: self.evaluated, ..Default::default() };
+        let mut counts = Counts::default();
         // (Tiles are decoded in parallel, a few at a time, and reduced to what is kept.)
         let seen = self
             .tiles
@@ -128,34 +170,99 @@ impl Run<'_> {
                 },
             )?;
         let grouped = polylines::group_corners(corners, origin, r);
-        counts.corners = grouped.len() as u64;
-        let blocks = blocks::plan(&census);
-        counts.blocks = blocks.list.len() as u64;
-        Ok(Survey { counts, boxes, blocks, grouped, origin })
+        Ok(Survey { side, origin, counts, boxes, blocks: blocks::plan(&census), grouped })
     }
 
-    /// Stages 3 and 4, a block at a time. Each block's smoothed, confirmed core is kept in the
-    /// working data for [`Run::attribute`].
-    #[allow(clippy::too_many_arguments)]
-    fn grow_blocks(
-        &self,
-        boxes: &[TileBox],
-        blocks: &Blocks,
-        grouped: &[DVec3],
-        origin: DVec3,
-        r: &Resolved,
-        counts: &mut Counts,
-        seconds: &mut Timings,
-    ) -> Result<Vec<(u32, Piece)>> {
+    /// The blocks this process grows: all of them, or a worker's share, a run of neighbouring
+    /// blocks (which read the same tiles).
+    fn block_share(&self, n: usize) -> std::ops::Range<usize> {
+        match self.worker {
+            None => 0..n,
+            Some(w) => {
+                let at = |i: u32| n * i as usize / w.count as usize;
+                at(w.index)..at(w.index + 1)
+            }
+        }
+    }
+
+    /// True if block `b`'s pieces are kept, grown for the blocks of `survey`, and its smoothed
+    /// edge points too.
+    fn block_done(&self, survey: &Survey, b: u32) -> Result<bool> {
+        if !self.ws.exists(&records::name(Pieces::DIR, b)) {
+            return Ok(false);
+        }
+        let kept = records::read::<Pieces>(&self.ws, b)?;
+        let block = &survey.blocks.list[b as usize];
+        if (kept.lo, kept.hi, kept.origin) != (block.lo, block.hi, survey.origin) {
+            return Ok(false);
+        }
+        records::read::<Smoothed>(&self.ws, b)?;
+        Ok(true)
+    }
+
+    /// The blocks of `share` left to grow: those not done by an earlier invocation, and those
+    /// whose results it left damaged (removed here, and listed in the report).
+    fn blocks_to_grow(&mut self, survey: &Survey, share: std::ops::Range<usize>) -> Result<Vec<u32>> {
+        let state: Vec<(u32, Result<bool>)> = share.into_par_iter().map(|b| (b as u32, self.block_done(survey, b as u32))).collect();
+        let mut todo = vec![];
+        for (b, done) in state {
+            match done {
+                Ok(true) => continue,
+                Ok(false) => {}
+                Err(Error::Damaged { .. }) => {
+                    self.ws.remove(&records::name(Smoothed::DIR, b));
+                    let name = records::name(Pieces::DIR, b);
+                    self.ws.remove(&name);
+                    self.repaired.push(self.ws.path(&name));
+                }
+                Err(e) => return Err(e),
+            }
+            todo.push(b);
+        }
+        Ok(todo)
+    }
+
+    /// Every block's pieces, in block order, and the edge points the consensus filter dropped
+    /// in all; None (noting what it waits for) while some block is not grown yet (another
+    /// worker's share).
+    fn all_pieces(&mut self, survey: &Survey) -> Result<Option<Grown>> {
+        let n = survey.blocks.list.len() as u32;
+        let done = (0..n).filter(|&b| self.ws.exists(&records::name(Pieces::DIR, b))).count();
+        if done < n as usize {
+            self.waiting = Some(format!("curves: {done} of {n} blocks grown (the other workers' share)"));
+            return Ok(None);
+        }
+        let kept = (0..n).into_par_iter().map(|b| records::read::<Pieces>(&self.ws, b)).collect::<Result<Vec<_>>>()?;
+        let (mut pieces, mut unconfirmed) = (vec![], 0);
+        for (b, k) in (0..n).zip(kept) {
+            let block = &survey.blocks.list[b as usize];
+            if (k.lo, k.hi, k.origin) != (block.lo, block.hi, survey.origin) {
+                let why = "grown for other blocks than this run's (by a worker given another --block-steps?)";
+                return Err(Error::damaged(self.ws.path(&records::name(Pieces::DIR, b)), why));
+            }
+            unconfirmed += k.unconfirmed;
+            pieces.extend(k.pieces.into_iter().map(|p| (b, p)));
+        }
+        Ok(Some((pieces, unconfirmed)))
+    }
+
+    /// Stages 3 and 4 for this process's share of the blocks, those not done yet, a block at a
+    /// time. Each block's smoothed, confirmed core is kept in the working data for
+    /// [`Run::attribute`], then its pieces, which mark it done.
+    fn grow_blocks(&mut self, survey: &Survey, r: &Resolved, seconds: &mut Timings) -> Result<()> {
+        let Survey { boxes, blocks, grouped, origin, .. } = survey;
+        let origin = *origin;
+        let share = self.block_share(blocks.list.len());
+        self.ws.create_dir(Smoothed::DIR)?;
+        self.ws.create_dir(Pieces::DIR)?;
+        let todo = self.blocks_to_grow(survey, share.clone())?;
         let q = snap_quantum(r.kappa);
         let (halo, reach) = polylines::block_context(r);
         // (The margin covers the f32 rounding of the k-d tree's distances.)
         let reach = reach * 1.001 + 4.0 * q;
-        self.ws.remove(Smoothed::DIR);
-        self.ws.create_dir(Smoothed::DIR)?;
         let (mut debug_edges, mut debug_smoothed) = (vec![], vec![]);
-        let mut pieces = vec![];
-        let bar = self.progress.bar("curves", blocks.list.len() as u64, "blocks");
+        let bar = self.progress.bar("curves", share.len() as u64, "blocks");
+        bar.inc((share.len() - todo.len()) as u64);
         // (Neighbouring blocks read the same tiles: the last few decoded are kept.)
         let mut tiles = Recent::new(self.opts.memory / 16 / 48);
         // Stage 3 for block b: its smoothed, confirmed core and halo, its own edge points as
@@ -210,38 +317,38 @@ impl Run<'_> {
         let grow = |pending: &Option<(u32, SmoothedEdges, Vec<DVec3>)>| match pending {
             Some((b, core, halo)) => {
                 let t = Instant::now();
-                let grown: Vec<(u32, Piece)> =
-                    polylines::grow_block(&core.points, halo, blocks, *b, r, &self.opts.cancel).into_iter().map(|p| (*b, p)).collect();
+                let grown = polylines::grow_block(&core.points, halo, blocks, *b, r, &self.opts.cancel);
                 (grown, t.elapsed().as_secs_f64())
             }
             None => (vec![], 0.0),
         };
         // (Growing is serial within a block: the next block is smoothed meanwhile.)
         let mut pending: Option<(u32, SmoothedEdges, Vec<DVec3>)> = None;
-        for b in 0..=blocks.list.len() {
-            let ((grown, growing), next) = rayon::join(|| grow(&pending), || (b < blocks.list.len()).then(|| smooth(b)));
-            pieces.extend(grown);
+        for k in 0..=todo.len() {
+            let ((grown, growing), next) = rayon::join(|| grow(&pending), || todo.get(k).map(|&b| smooth(b as usize)));
             seconds.growing += growing;
+            // (A cancelled block may be grown in part: it is not kept.)
             self.opts.cancel.check()?;
             if let Some((done, core, _)) = pending.take() {
+                let (block, unconfirmed) = (&blocks.list[done as usize], core.unconfirmed);
                 records::write(&self.ws, done, &Smoothed(core))?;
+                records::write(&self.ws, done, &Pieces { lo: block.lo, hi: block.hi, origin, unconfirmed, pieces: grown })?;
                 bar.inc(1);
             }
             if let Some(next) = next {
                 let (core, halo_points, raw, secs) = next?;
-                counts.unconfirmed += core.unconfirmed;
                 seconds.smoothing += secs;
                 if self.opts.debug.on() {
                     debug_edges.extend(raw);
                     debug_smoothed.extend_from_slice(&core.points);
                 }
-                pending = Some((b as u32, core, halo_points));
+                pending = Some((todo[k], core, halo_points));
             }
         }
         bar.finish();
         self.opts.debug.points("edges.obj", &debug_edges, origin);
         self.opts.debug.points("smoothed.obj", &debug_smoothed, origin);
-        Ok(pieces)
+        Ok(())
     }
 
     /// Each curve's vertex normals and evidence, from the smoothed edge points a block at a

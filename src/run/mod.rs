@@ -376,14 +376,13 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
     let Some(r) = run.tile_passes(&Input::Files(&files, filter), params, &first)? else {
         return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
     };
-    if !Worker::leads(worker) {
-        return Ok(WorkerStep::Waiting("the curves and outputs (worker 0 writes them)".into()));
-    }
+    let tau = run.tau;
+    let Some((curves, counts, seconds)) = run.curves(&r)? else {
+        return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
+    };
     for h in &headers {
         warnings.extend(coarse_coordinates(h, &run.manifest.grid, r.kappa));
     }
-    let tau = run.tau;
-    let (curves, counts, seconds) = run.curves(&r)?;
     run.write(&curves, &crs)?;
     let mut report = run.report(files, r, tau, counts, seconds, t0, resumed);
     report.warnings = warnings.into_list();
@@ -491,7 +490,7 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
     let mut run = Run::new(ws, manifest, opts, None);
     // (A lone run does every tile itself: it has nothing to wait for.)
     let r = run.tile_passes(&Input::Points(points), params, &here)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
-    let (curves, counts, seconds) = run.curves(&r)?;
+    let (curves, counts, seconds) = run.curves(&r)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
     Ok(Extraction { curves, params: r, tau: run.tau, counts, seconds })
 }
 
@@ -587,7 +586,7 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
 }
 
 /// The top-level names of a run's working data: the tile store and the per-tile results.
-const WORKING: [&str; 5] = [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, records::Smoothed::DIR];
+const WORKING: [&str; 7] = [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, curves::Survey::DIR, records::Smoothed::DIR, records::Pieces::DIR];
 
 /// Name of the file by which a work directory names the run directory it belongs to.
 const WORK_OWNER: &str = "crease-run";

@@ -1,12 +1,15 @@
-//! The per-tile results of the tile passes as records of the codec (see [`crate::codec`]):
-//! one file a tile and pass, `<dir>/<tile>.bin`, written atomically.
+//! The per-tile results of the tile passes, and the curve stage's per-block results, as
+//! records of the codec (see [`crate::codec`]): one file a tile (or block) and pass,
+//! `<dir>/<number>.bin`, written atomically.
 
+use super::curves::Survey;
 use crate::codec::{self, Reader, Writer};
 use crate::error::{Error, Result};
+use crate::extract::blocks::{Blocks, Piece};
 use crate::extract::candidates::{Residual, TileResiduals};
 use crate::extract::polylines::SmoothedEdges;
 use crate::extract::statistics::PointStats;
-use crate::extract::{TileEdges, WorldCorner, WorldEdge};
+use crate::extract::{Counts, TileEdges, WorldCorner, WorldEdge};
 use crate::workspace::Workspace;
 use glam::{DVec3, Vec3};
 use std::path::Path;
@@ -111,13 +114,17 @@ fn dvec3(r: &mut Reader) -> Result<DVec3> {
     Ok(DVec3::new(r.f64()?, r.f64()?, r.f64()?))
 }
 
+fn put_dvec3(w: &mut Writer, p: DVec3) {
+    p.to_array().iter().for_each(|&x| w.f64(x));
+}
+
 fn vec3(r: &mut Reader) -> Result<Vec3> {
     Ok(Vec3::new(r.f32()?, r.f32()?, r.f32()?))
 }
 
 /// An edge point as stored: its position (f64) and its two normals (f32), 48 bytes.
 fn put_edge(w: &mut Writer, p: DVec3, n: &[Vec3; 2]) {
-    p.to_array().iter().for_each(|&x| w.f64(x));
+    put_dvec3(w, p);
     n.iter().flat_map(|n| n.to_array()).for_each(|x| w.f32(x));
 }
 
@@ -140,7 +147,7 @@ impl Record for Edges {
         }
         w.u64(t.corners.len() as u64);
         for c in &t.corners {
-            c.p.to_array().iter().for_each(|&x| w.f64(x));
+            put_dvec3(w, c.p);
             w.f64(c.w);
         }
     }
@@ -185,6 +192,103 @@ impl Record for Smoothed {
     }
 }
 
+/// What the curve stage's survey found (see [`Survey`]), kept so that a resumed run, and
+/// every worker but the first, need not read every tile's edge points again. One record,
+/// number 0.
+impl Record for Survey {
+    const KIND: [u8; 4] = *b"SURV";
+    const DIR: &'static str = "survey";
+
+    fn encode(&self, w: &mut Writer) {
+        w.f64(self.side);
+        put_dvec3(w, self.origin);
+        let c = &self.counts;
+        [c.candidates, c.one_surface, c.scattered, c.edge_points, c.corner_points].iter().for_each(|&n| w.u64(n));
+        w.u64(self.boxes.len() as u64);
+        for &(t, lo, hi) in &self.boxes {
+            w.u32(t);
+            put_dvec3(w, lo);
+            put_dvec3(w, hi);
+        }
+        let (fine, cells) = self.blocks.cells();
+        w.f64(fine);
+        w.u64(cells.len() as u64);
+        cells.iter().flatten().flatten().for_each(|&x| w.u64(x as u64));
+        w.u64(self.grouped.len() as u64);
+        self.grouped.iter().for_each(|&p| put_dvec3(w, p));
+    }
+
+    fn decode(r: &mut Reader) -> Result<Self> {
+        let (side, origin) = (r.f64()?, dvec3(r)?);
+        let counts =
+            Counts { candidates: r.u64()?, one_surface: r.u64()?, scattered: r.u64()?, edge_points: r.u64()?, corner_points: r.u64()?, ..Default::default() };
+        let n = r.count(52)?;
+        let boxes = (0..n).map(|_| Ok((r.u32()?, dvec3(r)?, dvec3(r)?))).collect::<Result<_>>()?;
+        let fine = r.f64()?;
+        let n = r.count(48)?;
+        let mut cell = || -> Result<[i64; 3]> { Ok([r.u64()? as i64, r.u64()? as i64, r.u64()? as i64]) };
+        let cells = (0..n).map(|_| Ok([cell()?, cell()?])).collect::<Result<_>>()?;
+        let n = r.count(24)?;
+        let grouped = (0..n).map(|_| dvec3(r)).collect::<Result<_>>()?;
+        Ok(Survey { side, origin, counts, boxes, blocks: Blocks::from_cells(fine, cells), grouped })
+    }
+}
+
+/// A growth block's pieces of polylines (see [`crate::extract::blocks::cut`]), by block
+/// number, with what they were grown for: the block's box and the origin, so that pieces of
+/// another plan of blocks are never stitched in.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pieces {
+    /// The block's box, relative to the origin.
+    pub lo: DVec3,
+    /// See `lo`.
+    pub hi: DVec3,
+    /// The curve stage's origin.
+    pub origin: DVec3,
+    /// The block's edge points the consensus filter dropped.
+    pub unconfirmed: u64,
+    /// The pieces, in the order grown.
+    pub pieces: Vec<Piece>,
+}
+
+impl Record for Pieces {
+    const KIND: [u8; 4] = *b"PIEC";
+    const DIR: &'static str = "pieces";
+
+    fn encode(&self, w: &mut Writer) {
+        [self.lo, self.hi, self.origin].iter().for_each(|&p| put_dvec3(w, p));
+        w.u64(self.unconfirmed);
+        w.u64(self.pieces.len() as u64);
+        for p in &self.pieces {
+            w.u64(p.v.len() as u64);
+            p.v.iter().for_each(|&x| put_dvec3(w, x));
+            for end in p.ends {
+                w.u8(end.is_some() as u8);
+                put_dvec3(w, end.unwrap_or_default());
+            }
+            w.u8(p.closed as u8);
+        }
+    }
+
+    fn decode(r: &mut Reader) -> Result<Self> {
+        let (lo, hi, origin, unconfirmed) = (dvec3(r)?, dvec3(r)?, dvec3(r)?, r.u64()?);
+        let n = r.count(59)?;
+        let mut pieces = Vec::with_capacity(n);
+        for _ in 0..n {
+            let nv = r.count(24)?;
+            let v = (0..nv).map(|_| dvec3(r)).collect::<Result<_>>()?;
+            let mut end = || -> Result<Option<DVec3>> {
+                let some = r.u8()? != 0;
+                let p = dvec3(r)?;
+                Ok(some.then_some(p))
+            };
+            let ends = [end()?, end()?];
+            pieces.push(Piece { v, ends, closed: r.u8()? != 0 });
+        }
+        Ok(Pieces { lo, hi, origin, unconfirmed, pieces })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -208,6 +312,26 @@ mod tests {
         write(&ws, 2, &Smoothed(smoothed.clone())).unwrap();
         let back = read::<Smoothed>(&ws, 2).unwrap().0;
         assert_eq!((back.points, back.normals, back.unconfirmed), (smoothed.points, smoothed.normals, smoothed.unconfirmed));
+        let piece = Piece { v: vec![DVec3::new(0.25, 1.0, -3.0), DVec3::new(0.5, 1.0, -3.0)], ends: [None, Some(DVec3::new(0.75, 1.0, -3.0))], closed: false };
+        let pieces = Pieces { lo: DVec3::ZERO, hi: DVec3::splat(16.0), origin: DVec3::new(5e5, 4e6, 10.0), unconfirmed: 4, pieces: vec![piece.clone(), piece] };
+        write(&ws, 3, &pieces).unwrap();
+        assert_eq!(read::<Pieces>(&ws, 3).unwrap(), pieces);
+        let mut census = crate::extract::blocks::Census::new(32.0);
+        [DVec3::new(1.0, 2.0, 3.0), DVec3::new(-40.0, 2.0, 3.0)].into_iter().for_each(|p| census.add(p));
+        let survey = Survey {
+            side: 32.0,
+            origin: DVec3::new(-1.5, 2.0, 7.0),
+            counts: Counts { candidates: 9, one_surface: 1, scattered: 2, edge_points: 5, corner_points: 3, ..Default::default() },
+            boxes: vec![(7, DVec3::ZERO, DVec3::ONE)],
+            blocks: crate::extract::blocks::plan(&census),
+            grouped: vec![DVec3::new(0.5, 0.5, 0.5)],
+        };
+        write(&ws, 0, &survey).unwrap();
+        let back = read::<Survey>(&ws, 0).unwrap();
+        assert_eq!((back.side, back.origin, back.boxes, back.grouped), (survey.side, survey.origin, survey.boxes, survey.grouped));
+        assert_eq!((back.counts.candidates, back.counts.scattered, back.counts.corner_points), (9, 2, 3));
+        assert_eq!(back.blocks.list, survey.blocks.list);
+        assert_eq!(back.blocks.owner(DVec3::new(-39.0, 2.0, 3.0)), Some(0));
         // A residual record where an edge record belongs, and a missing one, are named.
         ws.write_atomic(&name(Edges::DIR, 5), &ws.read(&name(Residuals::DIR, 4)).unwrap().unwrap()).unwrap();
         let e = read::<Edges>(&ws, 5).err().unwrap().to_string();

@@ -1,7 +1,8 @@
 //! `crease status`: what a run directory has done and what is left.
 
+use super::curves::Survey;
 use super::manifest;
-use super::records::{Edges, Record, Residuals, Stats};
+use super::records::{Edges, Pieces, Record, Residuals, Stats};
 use crate::error::{Error, Result};
 use crate::workspace::Workspace;
 use serde::Serialize;
@@ -20,6 +21,9 @@ pub struct Status {
     pub bucketed: bool,
     /// Tiles done per pass: statistics, residuals, projection.
     pub passes: Vec<(String, usize)>,
+    /// Growth blocks of the curve stage grown, and how many there are, once the stage has
+    /// planned them.
+    pub blocks: Option<(usize, usize)>,
     /// Outputs written.
     pub finished: bool,
     /// Where the working data is, if not in the run directory.
@@ -48,6 +52,12 @@ pub fn status(dir: &Path) -> Result<Status> {
     let done = |dir: &str| tiles.iter().filter(|&&t| ws.exists(&super::records::name(dir, t))).count();
     let passes: Vec<(String, usize)> =
         [("statistics", Stats::DIR), ("residuals", Residuals::DIR), ("projection", Edges::DIR)].iter().map(|(n, d)| (n.to_string(), done(d))).collect();
+    // (The survey is kept once the curve stage has planned its blocks; a damaged one is made
+    // again by the run.)
+    let blocks = super::records::read::<Survey>(&ws, 0).ok().map(|s| {
+        let n = s.blocks.list.len();
+        ((0..n as u32).filter(|&b| ws.exists(&super::records::name(Pieces::DIR, b))).count(), n)
+    });
     let summary = if m.finished && m.cleaned {
         "finished (working data removed)".to_string()
     } else if m.finished {
@@ -55,9 +65,11 @@ pub fn status(dir: &Path) -> Result<Status> {
     } else if !m.bucketed {
         "bucketing not finished (it restarts from the beginning)".to_string()
     } else {
-        match passes.iter().find(|p| p.1 < tiles.len()) {
-            Some((name, n)) => format!("in {name}: {n} of {} tiles done", tiles.len()),
-            None => "curves and outputs left to do".to_string(),
+        match (passes.iter().find(|p| p.1 < tiles.len()), blocks) {
+            (Some((name, n)), _) => format!("in {name}: {n} of {} tiles done", tiles.len()),
+            (None, Some((done, n))) if done < n => format!("in curves: {done} of {n} growth blocks done"),
+            (None, Some(_)) => "stitching, completion and outputs left to do".to_string(),
+            (None, None) => "curves and outputs left to do".to_string(),
         }
     };
     Ok(Status {
@@ -66,6 +78,7 @@ pub fn status(dir: &Path) -> Result<Status> {
         tiles: tiles.len(),
         bucketed: m.bucketed,
         passes,
+        blocks,
         finished: m.finished,
         work_dir: m.work_dir.clone(),
         cleaned: m.cleaned,
@@ -85,6 +98,9 @@ pub fn render_status(s: &Status) -> String {
     );
     for (name, n) in s.passes.iter().filter(|_| !s.cleaned) {
         out += &format!("  {name:<10} {n}/{}\n", s.tiles);
+    }
+    if let Some((done, n)) = s.blocks.filter(|_| !s.cleaned) {
+        out += &format!("  curves     {done}/{n} growth blocks\n");
     }
     out += &format!("  outputs    {}\n", if s.finished { "written" } else { "not yet" });
     if let Some(w) = s.work_dir.as_ref().filter(|_| !s.cleaned) {
