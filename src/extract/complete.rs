@@ -180,15 +180,23 @@ fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
 }
 
 /// The vertices of all curves in a grid. A curve that changes gets a new version and its
-/// vertices are added again; entries of older versions are skipped.
+/// vertices are added again; entries of older versions are skipped, and dropped once they
+/// outnumber the current ones (a long curve that many ends join would otherwise fill the grid
+/// with its old versions: 0.3 GB at 4 M vertices).
 struct Vertices {
+    cell: f64,
     grid: HashGrid<(u32, u32, u32)>,
     version: Vec<u32>,
+    /// Each curve's vertices in its current version's entries.
+    indexed: Vec<usize>,
+    /// Entries in the grid, and those of current versions.
+    entries: usize,
+    current: usize,
 }
 
 impl Vertices {
     fn new(curves: &[Curve], cell: f64) -> Vertices {
-        let mut v = Vertices { grid: HashGrid::new(cell), version: vec![] };
+        let mut v = Vertices { cell, grid: HashGrid::new(cell), version: vec![], indexed: vec![], entries: 0, current: 0 };
         for ci in 0..curves.len() {
             v.update(curves, ci);
         }
@@ -199,12 +207,35 @@ impl Vertices {
     fn update(&mut self, curves: &[Curve], ci: usize) {
         if ci >= self.version.len() {
             self.version.resize(ci + 1, 0);
+            self.indexed.resize(ci + 1, 0);
         }
         self.version[ci] += 1;
+        self.insert(curves, ci);
+        let n = curves[ci].v.len();
+        self.current = self.current - self.indexed[ci] + n;
+        self.indexed[ci] = n;
+        if self.entries > 2 * self.current + 4096 {
+            self.compact(curves);
+        }
+    }
+
+    fn insert(&mut self, curves: &[Curve], ci: usize) {
         let ver = self.version[ci];
         for (vi, &q) in curves[ci].v.iter().enumerate() {
             self.grid.insert(q, (ci as u32, ver, vi as u32));
         }
+        self.entries += curves[ci].v.len();
+    }
+
+    /// A new grid of the indexed curves' vertices as they are now, at their current versions.
+    /// (A curve changed but not yet updated gets entries that its update makes old, as before.)
+    fn compact(&mut self, curves: &[Curve]) {
+        (self.grid, self.entries) = (HashGrid::new(self.cell), 0);
+        for ci in 0..self.version.len() {
+            self.insert(curves, ci);
+            self.indexed[ci] = curves[ci].v.len();
+        }
+        self.current = self.entries;
     }
 }
 

@@ -36,8 +36,10 @@ pub type Line = (Vec<DVec3>, bool);
 /// let lines = stitch(vec![(0, left), (1, right)], 0.5, 0.1);
 /// assert_eq!(lines, vec![(vec![x(-2.0), x(-0.5), x(0.6), x(2.0)], false)]);
 /// ```
-pub fn stitch(pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
+pub fn stitch(mut pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
     let links = pair_crossings(&pieces, reach);
+    // (Each piece's vertices are moved into its line, not copied: the pieces and the lines
+    // are never held whole side by side.)
     let mut seen = vec![false; pieces.len()];
     let mut out = vec![];
     for p in 0..pieces.len() {
@@ -46,7 +48,7 @@ pub fn stitch(pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
         }
         if pieces[p].1.closed {
             seen[p] = true;
-            out.push((pieces[p].1.v.clone(), true));
+            out.push((std::mem::take(&mut pieces[p].1.v), true));
             continue;
         }
         // Back to the chain's first piece (or round a loop to this one).
@@ -64,9 +66,9 @@ pub fn stitch(pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
         let mut at = first;
         loop {
             seen[at] = true;
-            let piece = &pieces[at].1.v;
-            let part: Box<dyn Iterator<Item = &DVec3>> = if enter == 0 { Box::new(piece.iter()) } else { Box::new(piece.iter().rev()) };
-            join(&mut v, part.copied(), merge);
+            let piece = std::mem::take(&mut pieces[at].1.v);
+            let part: Box<dyn Iterator<Item = DVec3>> = if enter == 0 { Box::new(piece.into_iter()) } else { Box::new(piece.into_iter().rev()) };
+            join(&mut v, part, merge);
             match links[at][1 - enter] {
                 Some((q, f)) if q != first => (at, enter) = (q, f),
                 _ => break,

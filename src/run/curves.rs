@@ -30,6 +30,7 @@ pub(super) struct Survey {
     pub(super) origin: DVec3,
     /// The counts of stages 1 and 2.
     pub(super) counts: Counts,
+    /// The tiles that hold edge points, with their bounds.
     pub(super) boxes: Vec<TileBox>,
     pub(super) blocks: Blocks,
     /// Grouped corners, relative to the origin.
