@@ -192,9 +192,7 @@ impl Run<'_> {
         if !self.ws.exists(&records::name(Pieces::DIR, b)) {
             return Ok(false);
         }
-        let kept = records::read::<Pieces>(&self.ws, b)?;
-        let block = &survey.blocks.list[b as usize];
-        if (kept.lo, kept.hi, kept.origin) != (block.lo, block.hi, survey.origin) {
+        if !records::read::<Pieces>(&self.ws, b)?.grown_for(&survey.blocks.list[b as usize], survey.origin) {
             return Ok(false);
         }
         records::read::<Smoothed>(&self.ws, b)?;
@@ -236,8 +234,7 @@ impl Run<'_> {
         let kept = (0..n).into_par_iter().map(|b| records::read::<Pieces>(&self.ws, b)).collect::<Result<Vec<_>>>()?;
         let (mut pieces, mut unconfirmed) = (vec![], 0);
         for (b, k) in (0..n).zip(kept) {
-            let block = &survey.blocks.list[b as usize];
-            if (k.lo, k.hi, k.origin) != (block.lo, block.hi, survey.origin) {
+            if !k.grown_for(&survey.blocks.list[b as usize], survey.origin) {
                 let why = "grown for other blocks than this run's (by a worker given another --block-steps?)";
                 return Err(Error::damaged(self.ws.path(&records::name(Pieces::DIR, b)), why));
             }

@@ -5,7 +5,7 @@
 use super::curves::Survey;
 use crate::codec::{self, Reader, Writer};
 use crate::error::{Error, Result};
-use crate::extract::blocks::{Blocks, Piece};
+use crate::extract::blocks::{Block, Blocks, Piece};
 use crate::extract::candidates::{Residual, TileResiduals};
 use crate::extract::polylines::SmoothedEdges;
 use crate::extract::statistics::PointStats;
@@ -249,6 +249,13 @@ pub struct Pieces {
     pub unconfirmed: u64,
     /// The pieces, in the order grown.
     pub pieces: Vec<Piece>,
+}
+
+impl Pieces {
+    /// True if these pieces were grown for `block` of a survey with this `origin`.
+    pub fn grown_for(&self, block: &Block, origin: DVec3) -> bool {
+        (self.lo, self.hi, self.origin) == (block.lo, block.hi, origin)
+    }
 }
 
 impl Record for Pieces {
