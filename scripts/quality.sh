@@ -4,12 +4,13 @@
 # scored by `crease eval` (DESIGN.md section 4), with recall also over the resolvable truth
 # (features farther apart than 3 noise radii: `crease eval --resolvable`). Prints Markdown.
 #   scripts/quality.sh [WORKDIR] [POINTS] [SEED] [NOISES]
+# CREASE_BIN=path scores that binary instead of this tree's release build (to compare two builds
+# on the same clouds; the clouds are kept in WORKDIR and reused).
 # SEED is the extraction's (`crease extract --seed`, the robust fits' random streams; the clouds
 # are the same); NOISES defaults to "0 k1 k2 k4 0.005 0.01 0.02" (kN: N point spacings).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo build --release --quiet
-bin=$PWD/target/release/crease
+if [ -n "${CREASE_BIN:-}" ]; then bin=$(realpath "$CREASE_BIN"); else cargo build --release --quiet; bin=$PWD/target/release/crease; fi
 work=${1:-$(mktemp -d)}
 n=${2:-500000}
 seed=${3:-1}
