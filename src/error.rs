@@ -1,7 +1,7 @@
 //! Errors crease reports to its users.
 //!
 //! Every error that comes from bad input names the file and the problem in one line, so the
-//! CLI can print it and exit with code 2 (see [`Error::exit_code`]). Where a lower layer gave a
+//! CLI can print it and exit with code 65 (see [`Error::exit_code`]). Where a lower layer gave a
 //! cause (an I/O or a decompression error), it is kept as the error's [`source`].
 //!
 //! [`source`]: std::error::Error::source
@@ -85,16 +85,35 @@ impl Error {
         Error::Panic(name.to_string(), panic_message(&payload))
     }
 
-    /// Exit code for the CLI: 2 for bad input or usage, 1 for failures while writing, 130 when
-    /// interrupted, 70 for an internal error.
+    /// Exit code for the CLI: [`exit::USAGE`] for what the user asked (the code clap gives a
+    /// bad command line too), [`exit::DATA`] for bad input data, [`exit::OUTPUT`] for failures
+    /// while writing, [`exit::INTERRUPTED`] and [`exit::INTERNAL`].
     pub fn exit_code(&self) -> i32 {
         match self {
-            Error::Input { .. } | Error::Damaged { .. } | Error::Usage(_) => 2,
-            Error::Output { .. } => 1,
-            Error::Interrupted => 130,
-            Error::Panic(..) => 70,
+            Error::Usage(_) => exit::USAGE,
+            Error::Input { .. } | Error::Damaged { .. } => exit::DATA,
+            Error::Output { .. } => exit::OUTPUT,
+            Error::Interrupted => exit::INTERRUPTED,
+            Error::Panic(..) => exit::INTERNAL,
         }
     }
+}
+
+/// The CLI's exit codes (besides 0). Scripts can tell a mistyped command, which no retry
+/// fixes, from an input that is bad, and both from a run that was stopped and can be resumed.
+pub mod exit {
+    /// An output could not be written (disk full, permission denied).
+    pub const OUTPUT: i32 = 1;
+    /// A bad command line or option value, a job that differs from the one its run directory
+    /// holds (without `--force`), or a run directory in use by another run.
+    pub const USAGE: i32 = 2;
+    /// Bad input data: an input file that is missing, unreadable or malformed, or a run
+    /// directory file that is damaged (sysexits' EX_DATAERR).
+    pub const DATA: i32 = 65;
+    /// An internal error (a bug in crease; sysexits' EX_SOFTWARE).
+    pub const INTERNAL: i32 = 70;
+    /// Stopped by Ctrl-C or SIGTERM; the same command resumes the run.
+    pub const INTERRUPTED: i32 = 130;
 }
 
 /// Turns an I/O error while reading `path` into an input error with a readable message,

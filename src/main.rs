@@ -8,7 +8,12 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 #[derive(Parser)]
-#[command(name = "crease", version, about = "Extracts sharp feature curves from laser scans larger than memory")]
+#[command(
+    name = "crease",
+    version,
+    about = "Extracts sharp feature curves from laser scans larger than memory",
+    after_help = "Exit codes: 0 done; 1 an output could not be written; 2 usage (a bad command line or value, a job that differs from its run directory's, a run directory in use); 65 bad input data (an input file missing, unreadable or malformed, a damaged run directory file); 70 internal error; 130 interrupted (the same command resumes)."
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,

@@ -1,8 +1,9 @@
-//! Bad input: every case exits with code 2 and one line naming the file and the problem,
-//! never a panic.
+//! Bad input: every case exits with code 65 (bad input data; 2 is for usage errors) and one
+//! line naming the file and the problem, never a panic.
 
 mod common;
 
+use crease::error::exit;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -11,11 +12,11 @@ fn crease(args: &[&str]) -> (i32, String, String) {
     (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
-/// Runs `crease info PATH` and checks: exit 2, one stderr line, naming the file and containing
+/// Runs `crease info PATH` and checks: exit 65, one stderr line, naming the file and containing
 /// `needle`, no panic.
 fn expect_error(path: &Path, needle: &str) {
     let (code, _out, err) = crease(&["info", path.to_str().unwrap()]);
-    assert_eq!(code, 2, "exit code for {}: stderr {err}", path.display());
+    assert_eq!(code, exit::DATA, "exit code for {}: stderr {err}", path.display());
     assert!(!err.contains("panicked"), "panic: {err}");
     assert_eq!(err.trim_end().lines().count(), 1, "one line expected: {err}");
     let name = path.file_name().unwrap().to_str().unwrap();
@@ -156,7 +157,7 @@ fn directory_without_point_files() {
     let d = tmp();
     std::fs::write(d.path().join("readme.md"), "no points here").unwrap();
     let (code, _, err) = crease(&["info", d.path().to_str().unwrap()]);
-    assert_eq!(code, 2);
+    assert_eq!(code, exit::DATA);
     assert!(err.contains("directory holds no point files"), "{err}");
     assert!(err.contains(d.path().file_name().unwrap().to_str().unwrap()));
 }
@@ -196,7 +197,7 @@ fn too_many_tiles_and_an_edited_grid_are_refused() {
     let run = |size: &str| crease(&["extract", las.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tile-size", size, "-q"]);
     for size in ["1e-6", "0.01"] {
         let (code, _, err) = run(size);
-        assert_eq!(code, 2, "{size}: {err}");
+        assert_eq!(code, exit::USAGE, "{size}: {err}");
         assert!(err.contains("tiles, more than the") && err.trim_end().lines().count() == 1, "{size}: {err}");
     }
     let (code, _, err) = run("0.5");
@@ -207,7 +208,7 @@ fn too_many_tiles_and_an_edited_grid_are_refused() {
     m["grid"]["dims"] = serde_json::json!([100000, 100000, 1]);
     std::fs::write(&manifest, m.to_string()).unwrap();
     let (code, _, err) = run("0.5");
-    assert_eq!(code, 2, "{err}");
+    assert_eq!(code, exit::DATA, "{err}");
     assert!(err.contains("manifest.json: damaged run directory file"), "{err}");
 }
 
@@ -220,7 +221,7 @@ fn fifos_and_clouds_without_spread_are_refused() {
     let made = Command::new("mkfifo").arg(&fifo).status().map(|s| s.success()).unwrap_or(false);
     if made {
         let (code, _, err) = crease(&["extract", fifo.to_str().unwrap(), "-o", d.path().join("r1").to_str().unwrap(), "-q"]);
-        assert_eq!(code, 2, "{err}");
+        assert_eq!(code, exit::DATA, "{err}");
         assert!(err.contains("pipe.las: not a regular file"), "{err}");
     }
     let same = d.path().join("same.las");
@@ -232,7 +233,7 @@ fn fifos_and_clouds_without_spread_are_refused() {
     }
     w.close().unwrap();
     let (code, _, err) = crease(&["extract", same.to_str().unwrap(), "-o", d.path().join("r2").to_str().unwrap(), "-q"]);
-    assert_eq!(code, 2, "{err}");
+    assert_eq!(code, exit::DATA, "{err}");
     assert!(!err.contains("panicked") && err.trim_end().lines().count() == 1, "{err}");
     assert!(err.contains("same.las: the points have no spread"), "{err}");
 }
@@ -275,7 +276,7 @@ fn header_bounds_that_are_not_numbers() {
     assert!(!err.contains("no points") && !err.contains("panicked"), "{err}");
     assert!(err.contains("nan_bounds.las: the header's bounds are not usable (not finite or inverted); bounds come from the points"), "{err}");
     // (Collinear points: extraction runs and finds nothing, or refuses them clearly.)
-    assert!(code == 0 || (code == 2 && err.trim_end().lines().count() == 1), "{code}: {err}");
+    assert!(code == 0 || (code == exit::DATA && err.trim_end().lines().count() == 1), "{code}: {err}");
 }
 
 /// A LAZ header that disagrees with its compressed data: a record length two bytes longer than
@@ -310,7 +311,7 @@ fn laz_headers_that_disagree_with_their_data() {
         let p = d.path().join(name);
         std::fs::write(&p, b).unwrap();
         let (code, _, err) = crease(&["extract", p.to_str().unwrap(), "-o", d.path().join(format!("run_{name}")).to_str().unwrap(), "-q"]);
-        assert_eq!(code, 2, "{name}: {err}");
+        assert_eq!(code, exit::DATA, "{name}: {err}");
         assert!(!err.contains("panicked") && err.trim_end().lines().count() == 1, "{name}: {err}");
         assert!(err.contains(name) && err.contains(says), "{name}: {err}");
     }
@@ -462,7 +463,7 @@ fn recursive_directories_json_summaries_and_no_stream_output() {
     std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las"), tree.join("a/b/cube.las")).unwrap();
     let (t, run) = (tree.to_str().unwrap(), d.path().join("run"));
     let (code, _, err) = crease(&["extract", t, "-o", run.to_str().unwrap(), "-q"]);
-    assert_eq!(code, 2);
+    assert_eq!(code, exit::DATA);
     assert!(err.contains("tree: directory holds no point files"), "{err}");
     let (code, out, err) = crease(&["extract", t, "--recursive", "-o", run.to_str().unwrap(), "-q", "--json"]);
     assert_eq!((code, err.as_str()), (0, ""));
@@ -473,7 +474,7 @@ fn recursive_directories_json_summaries_and_no_stream_output() {
         assert!(Path::new(o.as_str().unwrap()).is_file(), "{o}");
     }
     let (code, _, err) = crease(&["extract", t, "-r", "-o", "-"]);
-    assert_eq!(code, 2);
+    assert_eq!(code, exit::USAGE);
     assert!(err.contains("-o -: crease writes a run directory"), "{err}");
     assert!(!Path::new("-").exists());
 }

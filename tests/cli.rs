@@ -45,7 +45,7 @@ fn view_writes_a_self_contained_page() {
     let lines = page.split("lin = dec(\"").nth(1).unwrap().split('"').next().unwrap();
     assert_eq!(lines.len().div_ceil(4) * 3 - lines.matches('=').count(), segments * 2 * 3 * 4);
     let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(["view", d.path().to_str().unwrap()]).output().unwrap();
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(crease::error::exit::DATA));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a crease run directory"));
 }
 
@@ -77,11 +77,11 @@ fn working_data_goes_to_the_work_dir_and_clean_removes_it() {
     stdout(&["extract", cube, "-o", &p("run"), "-q", "--min-confidence", "0.99"]);
     assert_ne!(curves("run"), curves("plain"));
     let (code, err) = run(&["extract", cube, "-o", &p("run"), "-q", "--work-dir", &p("other")]);
-    assert_eq!(code, Some(2));
+    assert_eq!(code, Some(crease::error::exit::USAGE));
     assert!(err.contains("keeps its working data in") && err.contains("scratch"), "{err}");
     assert!(!d.path().join("other").exists(), "a refused work directory was created");
     let (code, err) = run(&["extract", cube, "-o", &p("run2"), "-q", "--work-dir", &p("scratch")]);
-    assert_eq!(code, Some(2));
+    assert_eq!(code, Some(crease::error::exit::USAGE));
     assert!(err.contains("holds the working data of the run in"), "{err}");
     // --clean, on a finished run with a work directory and on one without.
     stdout(&["extract", cube, "-o", &p("run"), "-q", "--clean"]);
@@ -94,7 +94,7 @@ fn working_data_goes_to_the_work_dir_and_clean_removes_it() {
     }
     assert!(stdout(&["status", &p("plain")]).contains("finished (working data removed)"));
     let (code, err) = run(&["extract", cube, "-o", &p("plain"), "-q"]);
-    assert_eq!(code, Some(2));
+    assert_eq!(code, Some(crease::error::exit::USAGE));
     assert!(err.contains("working data was removed (--clean)") && err.contains("--force"), "{err}");
     stdout(&["view", &p("plain")]);
     stdout(&["extract", cube, "-o", &p("plain"), "-q", "--force"]);

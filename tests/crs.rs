@@ -107,6 +107,6 @@ fn a_wkt_in_a_later_evlr_names_every_output() {
     let geojson: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("curves.geojson")).unwrap()).unwrap();
     assert_eq!(geojson["crs"]["properties"]["name"], "urn:ogc:def:crs:EPSG::4258");
     let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "--a-srs", "UTM 32"]);
-    assert_eq!(code, 2);
+    assert_eq!(code, crease::error::exit::USAGE);
     assert!(err.contains("neither EPSG:N nor a WKT"), "{err}");
 }

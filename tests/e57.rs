@@ -73,7 +73,7 @@ fn an_e57_gives_the_curves_of_the_same_points_in_ply() {
         std::fs::write(&p, b).unwrap();
         for cmd in ["info", "scan"] {
             let (code, err) = crease(&[cmd, p.to_str().unwrap()]);
-            assert_eq!(code, 2, "{name} {cmd}: {err}");
+            assert_eq!(code, crease::error::exit::DATA, "{name} {cmd}: {err}");
             assert!(!err.contains("panicked") && err.trim_end().lines().count() == 1 && err.contains(name), "{name} {cmd}: {err}");
         }
     }

@@ -48,7 +48,7 @@ fn text_clouds_give_the_curves_of_the_same_points_in_ply() {
     }
     // A header naming the columns puts the class where it says: --classes 3 keeps nothing.
     let (code, err) = crease(&["extract", d.path().join("cube.csv").to_str().unwrap(), "-o", d.path().join("none").to_str().unwrap(), "-q", "--classes", "3"]);
-    assert_eq!(code, 2, "{err}");
+    assert_eq!(code, crease::error::exit::DATA, "{err}");
 
     for (name, text, says) in
         [("short.xyz", "0 0 0\n1 1\n", "line 2 has 2 values"), ("word.csv", "x,y,z\n1,2,three\n", "line 2: 'three' in column 2 is not a number")]
@@ -56,7 +56,7 @@ fn text_clouds_give_the_curves_of_the_same_points_in_ply() {
         let p = d.path().join(name);
         std::fs::write(&p, text).unwrap();
         let (code, err) = crease(&["info", p.to_str().unwrap()]);
-        assert_eq!(code, 2, "{err}");
+        assert_eq!(code, crease::error::exit::DATA, "{err}");
         assert!(err.trim_end().lines().count() == 1 && err.contains(name) && err.contains(says), "{err}");
     }
 }

@@ -206,7 +206,7 @@ fn changed_job_is_refused_unless_forced() {
     };
     assert!(run(&[]).status.success());
     let o = run(&["--step", "0.05"]);
-    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(o.status.code(), Some(crease::error::exit::USAGE));
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("parameters changed") && e.contains("--force"), "{e}");
     // Touch the input: its time changes.
@@ -214,7 +214,7 @@ fn changed_job_is_refused_unless_forced() {
     let bytes = std::fs::read(&input).unwrap();
     std::fs::write(&input, bytes).unwrap();
     let o = run(&[]);
-    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(o.status.code(), Some(crease::error::exit::USAGE));
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("cube.las changed"), "{e}");
     assert!(run(&["--force"]).status.success());
@@ -275,7 +275,7 @@ fn catalog_with_mixed_crs_is_refused() {
         w.finish().unwrap();
     }
     let o = crease().args(["extract", cat.to_str().unwrap(), "-o", d.path().join("run").to_str().unwrap(), "-q"]).output().unwrap();
-    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(o.status.code(), Some(crease::error::exit::DATA));
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("f1.las") && e.contains("CRS EPSG:2154 differs from EPSG:25832"), "{e}");
 }
@@ -317,7 +317,7 @@ fn damaged_run_directory_files_are_repaired_or_named() {
     let named = |path: &Path| {
         let o = run(&[]);
         let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(2), "{}: {err}", path.display());
+        assert_eq!(o.status.code(), Some(crease::error::exit::DATA), "{}: {err}", path.display());
         assert_eq!(err.lines().count(), 1, "{err}");
         assert!(err.contains(&format!("{}: damaged run directory file", path.display())) && err.contains("--force"), "{err}");
         assert!(run(&["--force"]).status.success());
@@ -360,7 +360,7 @@ fn a_second_run_on_the_same_directory_is_refused() {
     // (The first run, hundreds of tiles, takes seconds; the refusal, moments.)
     assert!(first.try_wait().unwrap().is_none(), "the first run ended before the second was refused: make it longer");
     let err = String::from_utf8_lossy(&second.stderr);
-    assert_eq!(second.status.code(), Some(2), "{err}");
+    assert_eq!(second.status.code(), Some(crease::error::exit::USAGE), "{err}");
     assert!(err.contains(&format!("in use by another crease run (process {})", first.id())), "{err}");
     assert!(first.wait().unwrap().success());
     assert_eq!(outputs(&out), outputs(&alone));

@@ -65,7 +65,7 @@ fn workers_and_lone_runs_do_not_mix_and_each_index_runs_once() {
     let args = |extra: &[&str]| -> Vec<String> { ["extract", &cube, "-o", &dir, "-q"].iter().chain(extra).map(|s| s.to_string()).collect() };
     let refused = |extra: &[&str], why: &str| {
         let out = crease(&args(extra));
-        assert_eq!(out.status.code(), Some(2), "{extra:?}");
+        assert_eq!(out.status.code(), Some(crease::error::exit::USAGE), "{extra:?}");
         let err = String::from_utf8_lossy(&out.stderr).into_owned();
         assert!(err.contains(why), "{extra:?}: {err}");
     };
@@ -121,10 +121,10 @@ fn the_slurm_chain_run_in_order_writes_the_curves_of_one_run() {
     // Flags that would break a chain are refused, and so is an argument the scripts cannot
     // hold (not UTF-8), with a message rather than a panic.
     let out = crease(&["slurm", input, "-o", chained.to_str().unwrap(), "--force"]);
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(crease::error::exit::USAGE));
     use std::os::unix::ffi::OsStrExt;
     let odd = std::ffi::OsStr::from_bytes(b"scan\xff.las");
     let out = crease(&[std::ffi::OsStr::new("slurm"), odd, std::ffi::OsStr::new("-o"), chained.as_os_str()]);
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(crease::error::exit::USAGE));
     assert!(String::from_utf8_lossy(&out.stderr).contains("is not UTF-8"), "{}", String::from_utf8_lossy(&out.stderr));
 }
