@@ -34,6 +34,10 @@ struct FilterArgs {
     /// Text clouds: lines to skip before the first point (with --columns).
     #[arg(long, default_value_t = 0, requires = "columns")]
     skip_lines: usize,
+    /// Keep only the points inside this box, faces included, in the inputs' units (4 values:
+    /// any height). A COPC file decompresses only the octree nodes that meet it.
+    #[arg(long, value_name = "XMIN,YMIN,[ZMIN,]XMAX,YMAX[,ZMAX]", value_delimiter = ',', allow_negative_numbers = true)]
+    bounds: Option<Vec<f64>>,
 }
 
 impl FilterArgs {
@@ -43,8 +47,25 @@ impl FilterArgs {
             .as_deref()
             .map(|c| crease::io::TextColumns::parse(c, self.skip_lines).map_err(|e| Error::Usage(format!("--columns {e}"))))
             .transpose()?;
-        Ok(crease::io::Filter { classes: self.classes.clone(), keep_noise: self.keep_noise, text })
+        let bounds = self.bounds.as_deref().map(box_of).transpose().map_err(|e| Error::Usage(format!("--bounds {e}")))?;
+        Ok(crease::io::Filter { classes: self.classes.clone(), keep_noise: self.keep_noise, text, bounds })
     }
+}
+
+/// The box `--bounds` gives: XMIN,YMIN,XMAX,YMAX (any height) or XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX.
+fn box_of(v: &[f64]) -> Result<crease::points::Bounds, String> {
+    let (min, max) = match *v {
+        [x0, y0, x1, y1] => ([x0, y0, -f64::MAX], [x1, y1, f64::MAX]),
+        [x0, y0, z0, x1, y1, z1] => ([x0, y0, z0], [x1, y1, z1]),
+        _ => return Err(format!("takes 4 or 6 numbers (XMIN,YMIN,XMAX,YMAX or XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX), not {}", v.len())),
+    };
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err("takes finite numbers".into());
+    }
+    if (0..3).any(|a| min[a] > max[a]) {
+        return Err(format!("has a minimum above its maximum ({min:?} to {max:?})"));
+    }
+    Ok(crease::points::Bounds { min, max })
 }
 
 /// Method parameters; lengths in model units, the input CRS's horizontal unit (`crease info`

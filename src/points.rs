@@ -43,6 +43,25 @@ impl Bounds {
         }
     }
 
+    /// True if `p` lies in the box, its faces included.
+    #[inline]
+    pub fn contains(&self, p: DVec3) -> bool {
+        p.cmpge(DVec3::from(self.min)).all() && p.cmple(DVec3::from(self.max)).all()
+    }
+
+    /// True if the two boxes share a point (faces included).
+    pub fn meets(&self, other: &Bounds) -> bool {
+        (0..3).all(|a| self.min[a] <= other.max[a] && other.min[a] <= self.max[a])
+    }
+
+    /// The part of the box inside `other` (empty if they do not meet).
+    pub fn intersection(&self, other: &Bounds) -> Bounds {
+        if !self.meets(other) {
+            return Bounds::EMPTY;
+        }
+        Bounds { min: DVec3::from(self.min).max(other.min.into()).to_array(), max: DVec3::from(self.max).min(other.max.into()).to_array() }
+    }
+
     /// Length of the diagonal (0 for an empty box).
     pub fn diagonal(&self) -> f64 {
         if self.is_empty() {
@@ -163,6 +182,22 @@ impl PointChunk {
     /// True if the chunk holds no point.
     pub fn is_empty(&self) -> bool {
         self.xyz.is_empty()
+    }
+
+    /// Keeps only the points for which `keep` holds, in order.
+    pub fn retain(&mut self, keep: impl Fn(DVec3) -> bool) {
+        let mut k = 0;
+        for i in 0..self.len() {
+            if keep(self.xyz[i]) {
+                self.xyz[k] = self.xyz[i];
+                self.class[k] = self.class[i];
+                self.index[k] = self.index[i];
+                k += 1;
+            }
+        }
+        self.xyz.truncate(k);
+        self.class.truncate(k);
+        self.index.truncate(k);
     }
 
     /// Removes every point.

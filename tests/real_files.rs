@@ -94,7 +94,7 @@ fn class_filter() {
     let dir = real_dir();
     let f = dir.join("autzen_trim.las");
     let all = PointReader::open(&f, &Filter::keep_all()).unwrap().read_all().unwrap();
-    let ground = PointReader::open(&f, &Filter { classes: Some(vec![2]), keep_noise: false, text: None }).unwrap().read_all().unwrap();
+    let ground = PointReader::open(&f, &Filter { classes: Some(vec![2]), keep_noise: false, ..Filter::default() }).unwrap().read_all().unwrap();
     let n2 = all.class.iter().filter(|&&c| c == 2).count();
     assert!(n2 > 0 && n2 < all.len());
     assert_eq!(ground.len(), n2);

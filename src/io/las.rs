@@ -280,6 +280,63 @@ enum Points {
     Mapped { map: Mmap, offset: usize },
     /// Compressed: the `las` crate decompresses into a reusable buffer.
     Compressed { reader: Box<las::Reader>, buf: las::PointData },
+    /// COPC read with bounds: only the octree nodes that meet them are decompressed, a node a
+    /// chunk, in file order.
+    Copc { reader: Box<las::CopcReader<'static, std::io::BufReader<File>>>, nodes: Vec<Node>, next: usize },
+}
+
+/// A COPC octree node with points: its hierarchy entry, and the record index of its first point
+/// (the nodes' points follow each other in file order, so a node read alone gives its points
+/// the indices a front-to-back read gives them).
+struct Node {
+    entry: las::copc::Entry,
+    first: u64,
+}
+
+/// The most points a COPC node may hold (COPC writers keep nodes to some 100 000).
+const MAX_NODE_POINTS: i32 = 1 << 23;
+
+/// The nodes of a COPC file's octree that meet `bounds`, in file order, checked against the
+/// header and the file: `None` if the file is not COPC.
+fn copc_nodes(path: &Path, bytes: &[u8], header: &las::Header, bounds: &Bounds, scale: DVec3) -> Result<Option<Vec<Node>>> {
+    let Some(info) = header.copc_info_vlr() else {
+        return Ok(None);
+    };
+    let bad = |what: String| Error::input(path, format!("invalid COPC hierarchy: {what}"));
+    let hierarchy = header.copc_hierarchy_evlr().ok_or_else(|| bad("no hierarchy EVLR".into()))?;
+    let entries = super::guarded(path, "the COPC hierarchy", || hierarchy.iter_entries().collect::<las::Result<Vec<_>>>().map_err(|e| bad(e.to_string())))?;
+    let mut with_points: Vec<las::copc::Entry> = entries.into_iter().filter(|e| e.point_count > 0).copied().collect();
+    with_points.sort_by_key(|e| e.offset);
+    let (count, len) = (header.number_of_points(), bytes.len() as u64);
+    let (mut first, mut nodes) = (0u64, vec![]);
+    for e in with_points {
+        let k = e.key;
+        if !(0..=30).contains(&k.l) || [k.x, k.y, k.z].iter().any(|&c| c < 0 || (c as i64) >> k.l != 0) {
+            return Err(bad(format!("node key {}-{}-{}-{} is outside the octree", k.l, k.x, k.y, k.z)));
+        }
+        if e.byte_size <= 0 || e.offset.checked_add(e.byte_size as u64).is_none_or(|end| end > len) {
+            return Err(bad(format!("node {}-{}-{}-{} lies past the end of the file ({len} bytes)", k.l, k.x, k.y, k.z)));
+        }
+        // (A node is decompressed whole: its declared count sizes the buffer.)
+        if e.point_count > MAX_NODE_POINTS {
+            return Err(bad(format!(
+                "node {}-{}-{}-{} declares {} points, more than crease reads in one node ({MAX_NODE_POINTS})",
+                k.l, k.x, k.y, k.z, e.point_count
+            )));
+        }
+        let b = k.bounds(&info);
+        // (A point is stored in the node its scaled coordinates fall in: allow one unit of the
+        // scale either side.)
+        let node = Bounds { min: (DVec3::new(b.min.x, b.min.y, b.min.z) - scale).to_array(), max: (DVec3::new(b.max.x, b.max.y, b.max.z) + scale).to_array() };
+        if node.meets(bounds) {
+            nodes.push(Node { entry: e, first });
+        }
+        first += e.point_count as u64;
+    }
+    if first != count {
+        return Err(bad(format!("its nodes hold {first} points but the header declares {count}")));
+    }
+    Ok(Some(nodes))
 }
 
 /// A chunked reader over one LAS or LAZ file.
@@ -292,13 +349,23 @@ pub struct LasReader {
 }
 
 impl LasReader {
-    /// Maps the file and parses its header.
-    pub fn open(path: &Path) -> Result<LasReader> {
+    /// Maps the file and parses its header. With `bounds`, a COPC file is read through its
+    /// octree: only the nodes that meet the box are decompressed (the caller still drops the
+    /// points outside it).
+    pub fn open(path: &Path, bounds: Option<&Bounds>) -> Result<LasReader> {
         let map = map_file(path)?;
         let parsed = parse(path, &map)?;
         let header = cloud_header(path, &parsed)?;
         let layout = parsed.layout;
-        let points = if parsed.compressed {
+        let copc = match bounds {
+            Some(b) if parsed.compressed => copc_nodes(path, &map, &parsed.header, b, layout.scale)?,
+            _ => None,
+        };
+        let points = if let Some(nodes) = copc {
+            drop(map);
+            let reader = super::guarded(path, "the COPC reader", || las::CopcReader::from_path(path).map_err(|e| las_error(path, e)))?;
+            Points::Copc { reader: Box::new(reader), nodes, next: 0 }
+        } else if parsed.compressed {
             // Decompression reads the file once, front to back: a buffered reader keeps resident
             // memory bounded, where a map would keep every page touched.
             drop(map);
@@ -342,6 +409,19 @@ impl LasReader {
                 }
                 let layout = Layout { record_len: buf.record_len(), ..self.layout };
                 layout.decode(buf.raw_bytes(), self.next, out, table, keep_withheld);
+            }
+            Points::Copc { reader, nodes, next } => {
+                let Some(node) = nodes.get(*next) else {
+                    return Ok(0);
+                };
+                *next += 1;
+                let path = &self.path;
+                let k = node.entry.key;
+                let corrupt = |e: las::Error| Error::input(path, format!("corrupt compressed point data in COPC node {}-{}-{}-{}: {e}", k.l, k.x, k.y, k.z));
+                let data = super::guarded(path, "the COPC decoder", || reader.read_entry(&node.entry).map_err(corrupt))?;
+                let layout = Layout { record_len: data.record_len(), ..self.layout };
+                layout.decode(data.raw_bytes(), node.first, out, table, keep_withheld);
+                return Ok(node.entry.point_count as usize);
             }
         }
         self.next += n as u64;

@@ -34,12 +34,15 @@ pub struct Filter {
     pub keep_noise: bool,
     /// Where a text cloud's columns are (detected if `None`).
     pub text: Option<TextColumns>,
+    /// Keep only the points inside this box, faces included (all if `None`). A COPC file
+    /// decompresses only the octree nodes that meet it.
+    pub bounds: Option<Bounds>,
 }
 
 impl Filter {
     /// A filter that keeps every point.
     pub fn keep_all() -> Self {
-        Filter { classes: None, keep_noise: true, text: None }
+        Filter { classes: None, keep_noise: true, text: None, bounds: None }
     }
 
     /// A 256-entry table: `table[class]` is true if points of that class are kept.
@@ -249,6 +252,7 @@ pub struct PointReader {
     inner: Inner,
     table: [bool; 256],
     keep_withheld: bool,
+    bounds: Option<Bounds>,
 }
 
 impl PointReader {
@@ -268,13 +272,13 @@ impl PointReader {
     /// ```
     pub fn open(path: &Path, filter: &Filter) -> Result<PointReader> {
         let inner = match format_of(path) {
-            Some(FileFormat::Las) | Some(FileFormat::Laz) => Inner::Las(las::LasReader::open(path)?),
+            Some(FileFormat::Las) | Some(FileFormat::Laz) => Inner::Las(las::LasReader::open(path, filter.bounds.as_ref())?),
             Some(FileFormat::Ply) => Inner::Ply(ply::PlyReader::open(path)?),
             Some(FileFormat::E57) => Inner::E57(Box::new(e57::E57Reader::open(path)?)),
             Some(FileFormat::Text) => Inner::Text(text::TextReader::open(path, filter.text)?),
             None => return Err(unknown_type(path)),
         };
-        Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise })
+        Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise, bounds: filter.bounds })
     }
 
     /// The file's header.
@@ -287,17 +291,21 @@ impl PointReader {
         }
     }
 
-    /// Replaces `out` with the next points: reads up to `max` records from the file and keeps
-    /// those the filter accepts. Returns the number of records read (0 at the end of the file);
-    /// `out` may hold fewer points than that.
+    /// Replaces `out` with the next points: reads up to `max` records from the file (a COPC
+    /// file read with bounds: one octree node) and keeps those the filter accepts. Returns the
+    /// number of records read (0 at the end of the file); `out` may hold fewer points than that.
     pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk) -> Result<usize> {
         out.clear();
-        match &mut self.inner {
+        let n = match &mut self.inner {
             Inner::Las(r) => r.read_chunk(max, out, &self.table, self.keep_withheld),
             Inner::Ply(r) => r.read_chunk(max, out, &self.table),
             Inner::E57(r) => r.read_chunk(max, out, &self.table),
             Inner::Text(r) => r.read_chunk(max, out, &self.table),
+        }?;
+        if let Some(b) = &self.bounds {
+            out.retain(|p| b.contains(p));
         }
+        Ok(n)
     }
 
     /// Reads every remaining point into one chunk (for clouds known to fit in memory).

@@ -28,6 +28,9 @@ pub struct Job {
     pub keep_noise: bool,
     /// Text clouds' columns, if given.
     pub text: Option<crate::io::TextColumns>,
+    /// The box points are kept in, if given (`--bounds`; absent from 0.6.0 manifests).
+    #[serde(default)]
+    pub bounds: Option<crate::points::Bounds>,
     /// Tile edge length, if given.
     pub tile_size: Option<f64>,
     /// Memory budget in bytes.
@@ -160,7 +163,7 @@ pub fn job_difference(old: &Job, new: &Job) -> String {
     if old.params != new.params {
         return "the method parameters changed".to_string();
     }
-    if old.classes != new.classes || old.keep_noise != new.keep_noise || old.text != new.text {
+    if old.classes != new.classes || old.keep_noise != new.keep_noise || old.text != new.text || old.bounds != new.bounds {
         return "the point filters changed".to_string();
     }
     if old.tile_size != new.tile_size || old.memory != new.memory {

@@ -337,6 +337,7 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         classes: filter.classes.clone(),
         keep_noise: filter.keep_noise,
         text: filter.text,
+        bounds: filter.bounds,
         tile_size: opts.tile_size,
         memory: opts.memory,
     };
@@ -369,6 +370,13 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         if b.is_empty() {
             return Err(Error::input(&first, "no points"));
         }
+        if let Some(only) = &filter.bounds {
+            let inside = b.intersection(only);
+            if inside.is_empty() {
+                return Err(Error::Usage(format!("--bounds ({}) holds none of the inputs' points ({})", ranges(only), ranges(&b))));
+            }
+            b = inside;
+        }
         Ok((b, declared))
     };
     let (manifest, resumed) = plan(&mut ws, job, bounds, opts)?;
@@ -392,6 +400,18 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         run.clean()?;
     }
     Ok(WorkerStep::Finished(Box::new(report)))
+}
+
+/// A box as its three ranges, for messages: "x 0 to 2, y -0.2 to 0.9, any z".
+fn ranges(b: &Bounds) -> String {
+    let axis = |a: usize, name: &str| {
+        if b.min[a] <= -f64::MAX && b.max[a] >= f64::MAX {
+            format!("any {name}")
+        } else {
+            format!("{name} {} to {}", b.min[a], b.max[a])
+        }
+    };
+    format!("{}, {}, {}", axis(0, "x"), axis(1, "y"), axis(2, "z"))
 }
 
 /// Warnings of a run: each is passed to the run's handler as it is found, and listed in the
@@ -470,6 +490,7 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
         classes: None,
         keep_noise: true,
         text: None,
+        bounds: None,
         tile_size: opts.tile_size,
         memory: opts.memory,
     };
