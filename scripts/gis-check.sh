@@ -2,7 +2,8 @@
 # Opens a run's curves with GDAL as a GIS user would (Debian's gdal-bin): curves.geojson with
 # ogrinfo (feature count against report.json, the CRS GDAL sees against the run's), then
 # converted to Shapefile, FlatGeobuf and GeoPackage with ogr2ogr (feature count, CRS and the
-# per-curve fields kept), and the run's own curves.gpkg when it wrote one (--format gpkg).
+# per-curve fields kept), and the run's own curves.gpkg and curves.dxf when it wrote them
+# (--format gpkg,dxf).
 #
 #   scripts/gis-check.sh RUN_DIR...        (runs made by `crease extract`)
 #
@@ -51,6 +52,17 @@ for run in "$@"; do
     [ "$verdict" = ok ] || status=1
     printf '%-4s %-36s %-7s features %s/%s  fields %s  CRS %s\n' "$verdict" "$(basename "$run")" "$ext" "$count" "$curves" "$fields" "$crs"
   done
+  # A run written with --format dxf: its curves are the polylines on layer crease_curves, each
+  # with its attributes as the CREASE application's extended data (GDAL shows them as
+  # RawCodeValues); DXF has no CRS.
+  if [ -f "$run/curves.dxf" ]; then
+    info=$(ogrinfo --config DXF_INCLUDE_RAW_CODE_VALUES TRUE -al -q "$run/curves.dxf" 2>/dev/null)
+    lines=$(grep -c '^  Layer (String) = crease_curves' <<<"$info" || true)
+    attributed=$(grep -c '^  RawCodeValues (StringList) = .*1001 CREASE,1000 id,' <<<"$info" || true)
+    verdict=ok
+    [ "$lines" = "$curves" ] && [ "$attributed" = "$curves" ] || { verdict=FAIL; status=1; }
+    printf '%-4s %-36s %-7s features %s/%s  with attributes %s  CRS none (DXF has none)\n' "$verdict" "$(basename "$run")" dxf "$lines" "$curves" "$attributed"
+  fi
   rm -rf "$tmp"
 done
 exit $status

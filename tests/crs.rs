@@ -78,7 +78,8 @@ fn a_wkt_in_a_later_evlr_names_every_output() {
     }
     assert!(rows.iter().any(|(_, c)| !c.is_empty()), "cube edges end at corners");
 
-    // DXF: each curve a 3D polyline on its layer, each corner a point on another.
+    // DXF: each curve a 3D polyline on its layer, carrying its attributes as extended data;
+    // each corner a point on another layer.
     let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q", "--format", "dxf"]);
     assert_eq!(code, 0, "{err}");
     assert!(!run.join("curves.gpkg").exists());
@@ -89,8 +90,24 @@ fn a_wkt_in_a_later_evlr_names_every_output() {
             dxf::entities::EntityType::Polyline(p) => {
                 assert!(p.is_3d_polyline() && e.common.layer == "crease_curves");
                 assert!(p.vertices().count() >= 2);
+                assert_eq!(e.common.x_data.len(), 1, "curve {lines}: one block of extended data, on the polyline");
+                let x = &e.common.x_data[0];
+                assert_eq!(x.application_name, "CREASE");
+                let value = |name: &str| {
+                    let k = x.items.iter().position(|i| *i == dxf::XDataItem::Str(name.into())).unwrap_or_else(|| panic!("curve {lines}: no {name}"));
+                    x.items[k + 1].clone()
+                };
+                assert_eq!(value("id"), dxf::XDataItem::Long(lines));
+                let v: Vec<glam::DVec3> = p.vertices().map(|v| glam::DVec3::new(v.location.x, v.location.y, v.location.z)).collect();
+                let length: f64 = v.windows(2).map(|w| w[0].distance(w[1])).sum::<f64>() + if p.is_closed() { v[v.len() - 1].distance(v[0]) } else { 0.0 };
+                let dxf::XDataItem::Real(stated) = value("length") else { panic!("curve {lines}: length is not a real") };
+                assert!((stated - length).abs() < 1e-9 * length, "curve {lines}: length {stated}, vertices {length}");
+                let dxf::XDataItem::Real(angle) = value("angle") else { panic!("curve {lines}: angle is not a real") };
+                assert!((angle - 90.0).abs() < 5.0, "curve {lines}: a cube edge at {angle} degrees");
+                assert_eq!((value("start"), value("end")), (dxf::XDataItem::Str("corner".into()), dxf::XDataItem::Str("corner".into())));
                 lines += 1;
             }
+            dxf::entities::EntityType::Seqend(_) => assert!(e.common.x_data.is_empty(), "extended data left on a SEQEND"),
             dxf::entities::EntityType::ModelPoint(_) => {
                 assert_eq!(e.common.layer, "crease_corners");
                 corners += 1;
