@@ -78,6 +78,26 @@ impl Crs {
         Crs { epsg: root.as_ref().and_then(epsg_of), wkt: Some(wkt), horizontal_unit, vertical_unit }
     }
 
+    /// The CRS a free-text CRS field names (E57's `coordinateMetadata`): a WKT naming a code
+    /// or units, `EPSG:N`, or an OGC URN `urn:ogc:def:crs:EPSG::N`; None for anything else.
+    ///
+    /// ```
+    /// use crease::crs::Crs;
+    /// assert_eq!(Crs::from_metadata("EPSG:25832").unwrap().epsg, Some(25832));
+    /// assert_eq!(Crs::from_metadata("urn:ogc:def:crs:EPSG::2056").unwrap().epsg, Some(2056));
+    /// assert!(Crs::from_metadata("site grid, mm").is_none());
+    /// ```
+    pub fn from_metadata(text: &str) -> Option<Crs> {
+        let t = text.trim_end_matches('\0').trim();
+        let lower = t.to_ascii_lowercase();
+        let code = lower.strip_prefix("epsg:").or_else(|| lower.strip_prefix("urn:ogc:def:crs:epsg::")).or_else(|| lower.strip_prefix("urn:ogc:def:crs:epsg:"));
+        if let Some(code) = code {
+            return code.trim().parse().ok().map(|c| Crs { epsg: Some(c), ..Default::default() });
+        }
+        Node::parse(t)?;
+        Some(Crs::from_wkt(t)).filter(|c| c.epsg.is_some() || c.horizontal_unit.is_some())
+    }
+
     /// The CRS a user names on the command line: `EPSG:N` or a WKT.
     ///
     /// ```

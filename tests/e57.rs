@@ -78,3 +78,25 @@ fn an_e57_gives_the_curves_of_the_same_points_in_ply() {
         }
     }
 }
+
+#[test]
+fn coordinate_metadata_names_the_crs_when_it_is_a_code_or_a_wkt() {
+    let d = tempfile::tempdir().unwrap();
+    let wkt = r#"PROJCS["ETRS89 / UTM zone 32N",GEOGCS["ETRS89",DATUM["European_Terrestrial_Reference_System_1989",SPHEROID["GRS 1980",6378137,298.257222101]],UNIT["degree",0.0174532925199433]],PROJECTION["Transverse_Mercator"],UNIT["metre",1],AUTHORITY["EPSG","25832"]]"#;
+    for (k, (metadata, epsg)) in
+        [("EPSG:25832", Some(25832)), ("urn:ogc:def:crs:EPSG::2056", Some(2056)), (wkt, Some(25832)), ("site grid, mm", None)].into_iter().enumerate()
+    {
+        let path = d.path().join(format!("{k}.e57"));
+        let mut w = E57Writer::from_file(&path, "crease-test-file").unwrap();
+        w.set_coordinate_metadata(Some(metadata.into()));
+        let mut scan = w.add_pointcloud("scan", vec![Record::CARTESIAN_X_F64, Record::CARTESIAN_Y_F64, Record::CARTESIAN_Z_F64]).unwrap();
+        for i in 0..10 {
+            scan.add_point(vec![RecordValue::Double(i as f64), RecordValue::Double(0.0), RecordValue::Double(0.0)]).unwrap();
+        }
+        scan.finalize().unwrap();
+        w.finalize().unwrap();
+        let crs = crease::io::read_header(&path).unwrap().crs;
+        assert_eq!(crs.epsg, epsg, "{metadata}");
+        assert_eq!(crs.wkt.is_some(), metadata == wkt, "{metadata}");
+    }
+}

@@ -48,8 +48,8 @@ impl E57Reader {
         let reader = super::guarded(path, "the E57 decoder", || e57::E57Reader::from_file(path).map_err(|e| e57_error(path, e)))?;
         let clouds = reader.pointclouds();
         let count = clouds.iter().map(|c| c.records).try_fold(0u64, u64::checked_add).ok_or_else(|| Error::input(path, "scan record counts overflow"))?;
-        // (E57 names no CRS of its own; a WKT in its coordinate metadata is taken.)
-        let crs = reader.coordinate_metadata().map(Crs::from_wkt).filter(|c| c.epsg.is_some() || c.horizontal_unit.is_some()).unwrap_or_default();
+        // (E57's coordinate metadata is free text: a WKT or a code is taken, anything else left.)
+        let crs = reader.coordinate_metadata().and_then(Crs::from_metadata).unwrap_or_default();
         let h = reader.header();
         let header = CloudHeader {
             path: path.to_path_buf(),
