@@ -18,8 +18,9 @@ fn crease(args: &[&str]) -> (i32, String) {
     (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
-/// Records read and the points kept (sorted by position), through `filter`.
-fn read(path: &str, filter: &Filter) -> (u64, Vec<[u64; 3]>) {
+/// Records read, and the points kept (sorted by position) with their record indices, through
+/// `filter`.
+fn read_indexed(path: &str, filter: &Filter) -> (u64, Vec<([u64; 3], u64)>) {
     let mut r = PointReader::open(Path::new(path), filter).unwrap();
     let (mut records, mut kept) = (0, vec![]);
     let mut chunk = PointChunk::default();
@@ -29,10 +30,16 @@ fn read(path: &str, filter: &Filter) -> (u64, Vec<[u64; 3]>) {
             break;
         }
         records += n as u64;
-        kept.extend(chunk.xyz.iter().map(|p| p.to_array().map(f64::to_bits)));
+        kept.extend(chunk.xyz.iter().zip(&chunk.index).map(|(p, &i)| (p.to_array().map(f64::to_bits), i)));
     }
     kept.sort_unstable();
     (records, kept)
+}
+
+/// Records read and the points kept (sorted by position), through `filter`.
+fn read(path: &str, filter: &Filter) -> (u64, Vec<[u64; 3]>) {
+    let (records, kept) = read_indexed(path, filter);
+    (records, kept.into_iter().map(|(p, _)| p).collect())
 }
 
 /// The curves of a run, without the OBJ's comment lines (the COPC file carries a CRS).
@@ -53,12 +60,16 @@ fn a_copc_file_gives_the_curves_of_the_same_points_in_las() {
     let boxed = Filter { bounds: Some(corner), ..Filter::default() };
     let (copc_records, copc_kept) = read(COPC, &boxed);
     let (las_records, las_kept) = read(LAS, &boxed);
-    let inside: Vec<[u64; 3]> = all.iter().copied().filter(|p| corner.contains(glam::DVec3::from_array(p.map(f64::from_bits)))).collect();
+    let in_box = |p: &[u64; 3]| corner.contains(glam::DVec3::from_array(p.map(f64::from_bits)));
+    let inside: Vec<[u64; 3]> = all.iter().copied().filter(in_box).collect();
     assert!(!inside.is_empty() && inside.len() < all.len() / 4, "{} of {} inside", inside.len(), all.len());
     assert_eq!(copc_kept, inside);
     assert_eq!(las_kept, inside);
     assert_eq!(las_records, 50_000, "a LAS file is read whole");
     assert!(copc_records < 25_000, "the COPC file read {copc_records} records for {} points in the box", inside.len());
+    // The nodes read alone give their points the record indices of a front-to-back read.
+    let whole: Vec<([u64; 3], u64)> = read_indexed(COPC, &Filter::default()).1.into_iter().filter(|(p, _)| in_box(p)).collect();
+    assert_eq!(read_indexed(COPC, &boxed).1, whole);
 
     for (name, args) in [("whole", vec![]), ("box", vec!["--bounds", "0,0,1,0.5"])] {
         let runs = [("copc", COPC), ("las", LAS)].map(|(format, input)| {
