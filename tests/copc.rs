@@ -53,6 +53,8 @@ fn a_copc_file_gives_the_curves_of_the_same_points_in_las() {
     let (records, all) = read(COPC, &Filter::default());
     assert_eq!((records, all.clone()), read(LAS, &Filter::default()), "the same 50 000 points");
     assert_eq!(records, 50_000);
+    assert_eq!(crease::io::read_header(Path::new(COPC)).unwrap().version, "1.4 (COPC)");
+    assert_eq!(crease::io::read_header(Path::new(LAS)).unwrap().version, "1.2");
 
     // A box in a corner of the part: the octree's nodes that miss it are not decompressed,
     // and the points kept are those of a full read inside the box, whatever the format.

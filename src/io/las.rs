@@ -259,7 +259,8 @@ fn cloud_header(path: &Path, p: &Parsed) -> Result<CloudHeader> {
     Ok(CloudHeader {
         path: path.to_path_buf(),
         format: if p.compressed { FileFormat::Laz } else { FileFormat::Las },
-        version: h.version().to_string(),
+        // (A COPC file reads only the octree nodes that meet `--bounds`: worth knowing.)
+        version: if h.copc_info_vlr().is_some() { format!("{} (COPC)", h.version()) } else { h.version().to_string() },
         point_format: Some(fmt),
         count: h.number_of_points(),
         bounds,
