@@ -3,7 +3,7 @@
 //!
 //! Usage: cargo run --release -- IN.las OUT.copc.laz [MAX_NODE_POINTS]
 //!
-//! COPC requires a WKT CRS; a file without one is given a local engineering CRS in metres.
+//! COPC requires a WKT CRS; a file without a CRS is given a local engineering CRS in metres.
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -14,8 +14,9 @@ fn main() {
     let max_node: i32 = args.get(3).map_or(4096, |s| s.parse().expect("MAX_NODE_POINTS is an integer"));
     let mut reader = las::Reader::from_path(&args[1]).expect("readable LAS");
     let mut header = reader.header().clone();
-    let has_wkt = header.all_vlrs().any(|v| v.user_id == "LASF_Projection" && v.record_id == 2112);
-    if !has_wkt {
+    // (copc-rs turns GeoTIFF keys into a WKT itself.)
+    let has_crs = header.all_vlrs().any(|v| v.user_id == "LASF_Projection" && matches!(v.record_id, 2112 | 34735));
+    if !has_crs {
         let mut b = las::Builder::from(header.clone());
         b.vlrs.push(las::Vlr {
             user_id: "LASF_Projection".into(),
