@@ -238,3 +238,20 @@ fn clutter_scene_keeps_the_designed_edges_and_nothing_in_the_tree() {
     assert!(s.recall >= 0.95, "recall {}", s.recall);
     assert!(s.precision.unwrap() >= 0.97, "precision {:?}", s.precision);
 }
+
+/// Each curve's `angle` is the dihedral angle of its crease (the wedge the two surfaces enclose),
+/// not the angle between unoriented normals, which reads 60 for a 120 degree crease.
+#[test]
+fn a_curve_states_the_dihedral_angle_of_its_crease() {
+    let octahedron = 180.0 - (1.0f64 / 3.0).acos().to_degrees();
+    for (name, angle, dihedral) in [("wedge", 60.0, 60.0), ("wedge", 120.0, 120.0), ("wedge", 150.0, 150.0), ("octahedron", 90.0, octahedron)] {
+        let s = shape(name, angle).unwrap();
+        let pts = synth::sample(&s, &SynthOptions { n: 60_000, seed: 1, ..Default::default() });
+        let curves = extract(&pts, &Params::default()).curves;
+        assert!(!curves.is_empty(), "{name} {angle}");
+        for c in &curves {
+            let a = c.mean_dihedral_angle().expect("normals");
+            assert!((a - dihedral).abs() < 1.0, "{name} {angle}: curve {} at {a:.2} degrees, not {dihedral:.2}", c.id);
+        }
+    }
+}

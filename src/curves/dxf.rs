@@ -25,7 +25,7 @@ fn attributes(c: &Polyline) -> XData {
     let [start, end] = c.end_kinds();
     let mut items = vec![name("id"), XDataItem::Long(c.id as i32), name("closed"), XDataItem::Integer(c.closed as i16)];
     items.extend([name("length"), XDataItem::Real(c.length()), name("confidence"), XDataItem::Real(c.confidence as f64)]);
-    if let Some(a) = c.mean_normal_angle() {
+    if let Some(a) = c.mean_dihedral_angle() {
         items.extend([name("angle"), XDataItem::Real(a)]);
     }
     items.extend([name("start"), name(start), name("end"), name(end), name("corners"), name(&c.corner_list())]);

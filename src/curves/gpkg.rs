@@ -94,7 +94,7 @@ pub fn write_gpkg(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
         for c in curves {
             let [start, end] = c.end_kinds();
             insert
-                .execute(params![geometry(c, srs), c.id, c.closed, c.length(), c.confidence as f64, c.mean_normal_angle(), start, end, c.corner_list()])
+                .execute(params![geometry(c, srs), c.id, c.closed, c.length(), c.confidence as f64, c.mean_dihedral_angle(), start, end, c.corner_list()])
                 .map_err(out)?;
         }
     }

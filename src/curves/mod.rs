@@ -120,16 +120,18 @@ impl Polyline {
         self.segments().map(|(a, b)| a.distance(b)).sum()
     }
 
-    /// Mean angle between the two surfaces' normals, in degrees folded to 0-90 (90: a
-    /// right-angled crease), over the vertices whose normals are known; None if none are. (The
-    /// normals are not oriented outwards, so a 60 degree and a 120 degree dihedral angle, or a
-    /// convex and a concave crease, read the same.)
-    pub fn mean_normal_angle(&self) -> Option<f64> {
+    /// Mean dihedral angle, in degrees: the angle of the wedge that the two surfaces enclose at
+    /// the crease (90 at a cube's edge, 135 where a chamfer meets a face, towards 180 as the
+    /// crease flattens), over the vertices whose normals are known; None if none are. The
+    /// normals point away from each other's half-surface (see the edge points of stage 3), so
+    /// the angle is 180 minus the angle between them. Which side of the wedge is solid is not
+    /// known, so a convex and a concave crease of the same opening read the same.
+    pub fn mean_dihedral_angle(&self) -> Option<f64> {
         let angles: Vec<f64> = self
             .vertices
             .iter()
             .filter(|v| v.n[0] != Vec3::ZERO && v.n[1] != Vec3::ZERO)
-            .map(|v| (v.n[0].dot(v.n[1]).abs().min(1.0) as f64).acos().to_degrees())
+            .map(|v| 180.0 - (v.n[0].dot(v.n[1]).clamp(-1.0, 1.0) as f64).acos().to_degrees())
             .collect();
         (!angles.is_empty()).then(|| angles.iter().sum::<f64>() / angles.len() as f64)
     }

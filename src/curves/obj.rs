@@ -1,6 +1,6 @@
 //! Wavefront OBJ polylines: `v x y z` vertices and `l i j k ...` lines, one `o` per curve, with
 //! the curve's confidence in a `# confidence c` comment after it, and its other attributes
-//! (length, mean normal angle, end kinds, corner vertices) in a `# length ...` comment (other
+//! (length, mean dihedral angle, end kinds, corner vertices) in a `# length ...` comment (other
 //! readers skip both).
 //! Corner vertices shared by several curves are written once and referenced by each.
 
@@ -67,7 +67,7 @@ fn write_obj_to(w: &mut impl Write, curves: &[Polyline], crs: &Crs) -> std::io::
         writeln!(w, "o curve_{}", c.id)?;
         writeln!(w, "# confidence {}", c.confidence)?;
         let [start, end] = c.end_kinds();
-        let angle = c.mean_normal_angle().map_or("unknown".to_string(), |a| format!("{a:.1}"));
+        let angle = c.mean_dihedral_angle().map_or("unknown".to_string(), |a| format!("{a:.1}"));
         let corners = c.corner_list();
         writeln!(w, "# length {} angle {angle} start {start} end {end} corners {}", c.length(), if corners.is_empty() { "none" } else { &corners })?;
         write!(w, "l")?;

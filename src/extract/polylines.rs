@@ -224,7 +224,7 @@ impl Gathered {
 
 /// The curve `c` with what was gathered along it, made into the output polyline `id` (world
 /// coordinates, from positions relative to `origin`): the normals' orientation is carried along
-/// the curve, vertices without normals take their neighbours', and the evidence gives the
+/// the curve (turning both of a pair together), vertices without normals take their neighbours', and the evidence gives the
 /// confidence.
 pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
     let mut prev: Option<[DVec3; 2]> = None;
@@ -232,7 +232,7 @@ pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64
     for (i, m) in g.normals.iter().enumerate() {
         if m[0] != glam::Vec3::ZERO && !c.corner[i] {
             let m = m.map(|x| x.as_dvec3());
-            let m = prev.map_or(m, |p| align(m, p));
+            let m = prev.map_or(m, |p| carry(m, p));
             n[i] = m;
             prev = Some(m);
         }
@@ -312,14 +312,34 @@ impl Evidence {
     }
 }
 
-/// Orders and signs the normal pair `n` to agree with `reference`.
-fn align(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
+/// Orders the normal pair `n` to match `reference` (which surface is first).
+fn order(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
     let straight = n[0].dot(reference[0]).abs() + n[1].dot(reference[1]).abs();
     let crossed = n[1].dot(reference[0]).abs() + n[0].dot(reference[1]).abs();
-    let [a, b] = if crossed > straight { [n[1], n[0]] } else { n };
-    let a = if a.dot(reference[0]) < 0.0 { -a } else { a };
-    let b = if b.dot(reference[1]) < 0.0 { -b } else { b };
-    [a, b]
+    if crossed > straight {
+        [n[1], n[0]]
+    } else {
+        n
+    }
+}
+
+/// Orders and signs the normal pair `n` to agree with `reference`, each normal on its own (for
+/// comparing pairs).
+fn align(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
+    let [a, b] = order(n, reference);
+    [if a.dot(reference[0]) < 0.0 { -a } else { a }, if b.dot(reference[1]) < 0.0 { -b } else { b }]
+}
+
+/// Orders the normal pair `n` to match `reference`, and turns both normals round where they
+/// point away from it: the pair keeps its own orientation (each normal away from the other's
+/// half-surface), which the dihedral angle is read from.
+fn carry(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
+    let [a, b] = order(n, reference);
+    if a.dot(reference[0]) + b.dot(reference[1]) < 0.0 {
+        [-a, -b]
+    } else {
+        [a, b]
+    }
 }
 
 #[cfg(test)]

@@ -277,7 +277,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     if crease_angle(e, &surfaces[0].quad, &surfaces[1].quad) < p.min_angle_deg {
         return out;
     }
-    out.edge = Some(EdgePoint { p: e, n: [surfaces[0].quad.normal(e), surfaces[1].quad.normal(e)] });
+    out.edge = Some(EdgePoint { p: e, n: wedge_normals(e, &surfaces[0].quad, &surfaces[1].quad) });
     if surfaces.len() >= 3 {
         if let Some(c) = project_to_corner(x, [&surfaces[0].quad, &surfaces[1].quad, &surfaces[2].quad], tol) {
             if c.distance(x) <= reach {
@@ -299,6 +299,16 @@ fn crease_angle(e: DVec3, a: &Quadric, b: &Quadric) -> f64 {
         return 0.0;
     }
     180.0 - da.dot(db).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// The normals of surfaces `a` and `b` at edge point `e`, each signed to point away from the
+/// other half-surface, so that the angle between them is 180 degrees minus the dihedral angle
+/// of the wedge the two half-surfaces enclose (whichever side of it is solid).
+fn wedge_normals(e: DVec3, a: &Quadric, b: &Quadric) -> [DVec3; 2] {
+    let (na, nb) = (a.normal(e), b.normal(e));
+    let t = na.cross(nb).normalize_or_zero();
+    let (da, db) = (across(a.frame.o, e, t), across(b.frame.o, e, t));
+    [if na.dot(db) > 0.0 { -na } else { na }, if nb.dot(da) > 0.0 { -nb } else { nb }]
 }
 
 /// Finds the best-supported surface among the remaining points and removes its inliers.

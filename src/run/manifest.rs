@@ -28,7 +28,7 @@ pub struct Job {
     pub keep_noise: bool,
     /// Text clouds' columns, if given.
     pub text: Option<crate::io::TextColumns>,
-    /// The box points are kept in, if given (`--bounds`; absent from 0.6.0 manifests).
+    /// The box points are kept in, if given (`--bounds`; absent from manifests of 0.6).
     #[serde(default)]
     pub bounds: Option<crate::points::Bounds>,
     /// Tile edge length, if given.
