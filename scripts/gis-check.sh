@@ -12,15 +12,21 @@ set -euo pipefail
 command -v ogrinfo >/dev/null || { echo "needs GDAL's ogrinfo (apt-get install gdal-bin)"; exit 2; }
 status=0
 for run in "$@"; do
+  if [ ! -f "$run/report.json" ]; then
+    echo "FAIL $run: no report.json (not a finished run directory)"; status=1; continue
+  fi
   curves=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['counts']['curves'])" "$run/report.json")
   epsg=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['crs']['epsg'] or '')" "$run/report.json")
   # Without a code, the CRS's name (the WKT's first quoted string) is what GDAL must show.
   name=$(python3 -c "import json,sys; w=json.load(open(sys.argv[1]))['crs']['wkt']; print(w.split('\"')[1] if w else '')" "$run/report.json")
   tmp=$(mktemp -d)
-  formats=("GeoJSON:geojson" "ESRI Shapefile:shp" "FlatGeobuf:fgb" "GPKG:gpkg")
+  formats=()
+  # (The conversions start from curves.geojson; a run written without it is checked on the
+  # formats it has.)
+  [ -f "$run/curves.geojson" ] && formats=("GeoJSON:geojson" "ESRI Shapefile:shp" "FlatGeobuf:fgb" "GPKG:gpkg")
   # (A run written with --format gpkg: its own GeoPackage too.)
   [ -f "$run/curves.gpkg" ] && formats+=("native:curves.gpkg")
-  for fmt in "${formats[@]}"; do
+  for fmt in "${formats[@]+"${formats[@]}"}"; do
     driver=${fmt%%:*}; ext=${fmt##*:}
     src="$run/curves.geojson"
     if [ "$driver" = native ]; then
