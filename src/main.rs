@@ -62,10 +62,11 @@ fn box_of(v: &[f64]) -> Result<crease::points::Bounds, String> {
     if v.iter().any(|x| !x.is_finite()) {
         return Err("takes finite numbers".into());
     }
+    let b = crease::points::Bounds { min, max };
     if (0..3).any(|a| min[a] > max[a]) {
-        return Err(format!("has a minimum above its maximum ({min:?} to {max:?})"));
+        return Err(format!("has a minimum above its maximum ({})", b.ranges()));
     }
-    Ok(crease::points::Bounds { min, max })
+    Ok(b)
 }
 
 /// Method parameters; lengths in model units, the input CRS's horizontal unit (`crease info`

@@ -62,6 +62,19 @@ impl Bounds {
         Bounds { min: DVec3::from(self.min).max(other.min.into()).to_array(), max: DVec3::from(self.max).min(other.max.into()).to_array() }
     }
 
+    /// The box as its three ranges, for messages: "x 0 to 2, y -0.2 to 0.9, any z" (an axis
+    /// from -f64::MAX to f64::MAX is "any").
+    pub fn ranges(&self) -> String {
+        let axis = |a: usize, name: &str| {
+            if self.min[a] <= -f64::MAX && self.max[a] >= f64::MAX {
+                format!("any {name}")
+            } else {
+                format!("{name} {} to {}", self.min[a], self.max[a])
+            }
+        };
+        format!("{}, {}, {}", axis(0, "x"), axis(1, "y"), axis(2, "z"))
+    }
+
     /// Length of the diagonal (0 for an empty box).
     pub fn diagonal(&self) -> f64 {
         if self.is_empty() {

@@ -224,8 +224,8 @@ impl Gathered {
 
 /// The curve `c` with what was gathered along it, made into the output polyline `id` (world
 /// coordinates, from positions relative to `origin`): the normals' orientation is carried along
-/// the curve (turning both of a pair together), vertices without normals take their neighbours', and the evidence gives the
-/// confidence.
+/// the curve (turning both of a pair together), vertices without normals take their
+/// neighbours', and the evidence gives the confidence.
 pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
     let mut prev: Option<[DVec3; 2]> = None;
     let mut n: Vec<[DVec3; 2]> = vec![[DVec3::ZERO; 2]; c.v.len()];

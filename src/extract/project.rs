@@ -97,7 +97,7 @@ const SEEDS: usize = 16;
 const SEED_PATCH: usize = 6;
 /// Surfaces whose planes (unoriented) are closer than this share of the minimum crease angle
 /// are one surface; below 1 so that acute wedges, whose planes are as close as those of a
-/// gentle fold, are still split (`crease_angle` then tells them apart).
+/// gentle fold, are still split (`Wedge::crease_angle` then tells them apart).
 const MIN_SPLIT_FRACTION: f64 = 0.8;
 /// A seed plane whose low quantile of residuals is within this many noise deviations ends the
 /// search for better seeds. (0.674, the median of a normal deviate, was used before; 1.0 takes
@@ -247,7 +247,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
         let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count, SEED_FLOOR * p.noise) else { break };
         // A "new" surface (nearly) parallel to one already found is the same surface's
         // leftovers. (How sharp a crease is can only be told once its edge is known: see
-        // `crease_angle`.)
+        // `Wedge::crease_angle`.)
         let nn = surf.quad.frame.n;
         let split = (MIN_SPLIT_FRACTION * p.min_angle_deg).to_radians().cos();
         let distinct = surfaces.iter().all(|o| o.quad.frame.n.dot(nn).abs() < split);
@@ -274,10 +274,11 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     if e.distance(x) > reach {
         return out;
     }
-    if crease_angle(e, &surfaces[0].quad, &surfaces[1].quad) < p.min_angle_deg {
+    let wedge = Wedge::at(e, &surfaces[0].quad, &surfaces[1].quad);
+    if wedge.crease_angle() < p.min_angle_deg {
         return out;
     }
-    out.edge = Some(EdgePoint { p: e, n: wedge_normals(e, &surfaces[0].quad, &surfaces[1].quad) });
+    out.edge = Some(EdgePoint { p: e, n: wedge.normals() });
     if surfaces.len() >= 3 {
         if let Some(c) = project_to_corner(x, [&surfaces[0].quad, &surfaces[1].quad, &surfaces[2].quad], tol) {
             if c.distance(x) <= reach {
@@ -288,27 +289,40 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     out
 }
 
-/// How far from flat the crease at edge point `e` is, in degrees: 180 minus the dihedral
-/// angle between the two half-surfaces, each represented by the direction from the edge to its
-/// points' centroid (the fit frames' origins). An acute wedge and a nearly flat fold have
-/// planes at the same unoriented angle; the half-surface directions tell them apart.
-fn crease_angle(e: DVec3, a: &Quadric, b: &Quadric) -> f64 {
-    let t = a.normal(e).cross(b.normal(e)).normalize_or_zero();
-    let (da, db) = (across(a.frame.o, e, t).normalize_or_zero(), across(b.frame.o, e, t).normalize_or_zero());
-    if da == DVec3::ZERO || db == DVec3::ZERO {
-        return 0.0;
-    }
-    180.0 - da.dot(db).clamp(-1.0, 1.0).acos().to_degrees()
+/// The wedge two fitted surfaces make at a point `e` of their intersection: their normals
+/// there, the crease's direction `t`, and the unit directions `da`, `db` across it from the
+/// edge to each half-surface's points (the fit frames' origins); zero where undefined.
+struct Wedge {
+    n: [DVec3; 2],
+    t: DVec3,
+    da: DVec3,
+    db: DVec3,
 }
 
-/// The normals of surfaces `a` and `b` at edge point `e`, each signed to point away from the
-/// other half-surface, so that the angle between them is 180 degrees minus the dihedral angle
-/// of the wedge the two half-surfaces enclose (whichever side of it is solid).
-fn wedge_normals(e: DVec3, a: &Quadric, b: &Quadric) -> [DVec3; 2] {
-    let (na, nb) = (a.normal(e), b.normal(e));
-    let t = na.cross(nb).normalize_or_zero();
-    let (da, db) = (across(a.frame.o, e, t), across(b.frame.o, e, t));
-    [if na.dot(db) > 0.0 { -na } else { na }, if nb.dot(da) > 0.0 { -nb } else { nb }]
+impl Wedge {
+    fn at(e: DVec3, a: &Quadric, b: &Quadric) -> Wedge {
+        let n = [a.normal(e), b.normal(e)];
+        let t = n[0].cross(n[1]).normalize_or_zero();
+        Wedge { n, t, da: across(a.frame.o, e, t).normalize_or_zero(), db: across(b.frame.o, e, t).normalize_or_zero() }
+    }
+
+    /// How far from flat the crease is, in degrees: 180 minus the dihedral angle between the
+    /// half-surfaces. An acute wedge and a nearly flat fold have planes at the same unoriented
+    /// angle; the half-surface directions tell them apart.
+    fn crease_angle(&self) -> f64 {
+        if self.da == DVec3::ZERO || self.db == DVec3::ZERO {
+            return 0.0;
+        }
+        180.0 - self.da.dot(self.db).clamp(-1.0, 1.0).acos().to_degrees()
+    }
+
+    /// The two normals, each signed to point away from the other half-surface, so that the
+    /// angle between them is 180 degrees minus the dihedral angle of the wedge (whichever side
+    /// of it is solid).
+    fn normals(&self) -> [DVec3; 2] {
+        let [na, nb] = self.n;
+        [if na.dot(self.db) > 0.0 { -na } else { na }, if nb.dot(self.da) > 0.0 { -nb } else { nb }]
+    }
 }
 
 /// Finds the best-supported surface among the remaining points and removes its inliers.
@@ -546,8 +560,7 @@ fn across(p: DVec3, e: DVec3, t: DVec3) -> DVec3 {
 /// when d > s tan(angle / 2), the angle being the one between the half-surfaces.
 fn half_surfaces(a: &Surface, b: &Surface, x: DVec3, tol: f64) -> Option<Sides> {
     let e = project_to_intersection(x, &a.quad, &b.quad, tol)?;
-    let t = a.quad.normal(e).cross(b.quad.normal(e)).normalize_or_zero();
-    let (da, db) = (across(a.quad.frame.o, e, t).normalize_or_zero(), across(b.quad.frame.o, e, t).normalize_or_zero());
+    let Wedge { t, da, db, .. } = Wedge::at(e, &a.quad, &b.quad);
     let c = da.dot(db).clamp(-1.0, 1.0);
     // tan(angle / 2) = sin / (1 + cos).
     let w = CORE_FRACTION * a.threshold.max(b.threshold) * (1.0 + c) / (1.0 - c * c).sqrt().max(1e-3);

@@ -373,7 +373,7 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         if let Some(only) = &filter.bounds {
             let inside = b.intersection(only);
             if inside.is_empty() {
-                return Err(Error::Usage(format!("--bounds ({}) holds none of the inputs' points ({})", ranges(only), ranges(&b))));
+                return Err(Error::Usage(format!("--bounds ({}) holds none of the inputs' points ({})", only.ranges(), b.ranges())));
             }
             b = inside;
         }
@@ -400,18 +400,6 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         run.clean()?;
     }
     Ok(WorkerStep::Finished(Box::new(report)))
-}
-
-/// A box as its three ranges, for messages: "x 0 to 2, y -0.2 to 0.9, any z".
-fn ranges(b: &Bounds) -> String {
-    let axis = |a: usize, name: &str| {
-        if b.min[a] <= -f64::MAX && b.max[a] >= f64::MAX {
-            format!("any {name}")
-        } else {
-            format!("{name} {} to {}", b.min[a], b.max[a])
-        }
-    };
-    format!("{}, {}, {}", axis(0, "x"), axis(1, "y"), axis(2, "z"))
 }
 
 /// Warnings of a run: each is passed to the run's handler as it is found, and listed in the
