@@ -17,14 +17,16 @@ pub enum Input<'a> {
     Points(&'a [DVec3]),
 }
 
-/// Streams every point of `input` into `b`, counting them on `bar`.
+/// Streams every point of `input` into `b`, counting the records read on `bar` (points left
+/// out by the filter count too, as the bar's total is the records the inputs declare).
 pub fn bucket(input: &Input, b: &mut Bucketer, bar: &Bar, cancel: &Cancel) -> Result<()> {
     match input {
         Input::Points(points) => {
             for (k, part) in points.chunks(io::DEFAULT_CHUNK).enumerate() {
                 let first = (k * io::DEFAULT_CHUNK) as u64;
                 let chunk = PointChunk { xyz: part.to_vec(), class: vec![0; part.len()], index: (first..first + part.len() as u64).collect() };
-                add(b, 0, &chunk, bar, cancel)?;
+                add(b, 0, &chunk, cancel)?;
+                bar.inc(chunk.len() as u64);
             }
             Ok(())
         }
@@ -32,18 +34,17 @@ pub fn bucket(input: &Input, b: &mut Bucketer, bar: &Bar, cancel: &Cancel) -> Re
     }
 }
 
-fn add(b: &mut Bucketer, fi: usize, chunk: &PointChunk, bar: &Bar, cancel: &Cancel) -> Result<()> {
+fn add(b: &mut Bucketer, fi: usize, chunk: &PointChunk, cancel: &Cancel) -> Result<()> {
     // Global ids: file index in the high bits, record index in the low 40 bits.
     let gids: Vec<u64> = chunk.index.iter().map(|&i| ((fi as u64) << 40) | i).collect();
     b.add(chunk, &gids)?;
-    bar.inc(chunk.len() as u64);
     cancel.check()
 }
 
 /// The files are decoded on a thread of their own, one chunk ahead of the bucketing, so that
 /// decoding overlaps the sorting, compressing and writing of the tiles.
 fn bucket_files(files: &[PathBuf], filter: &Filter, b: &mut Bucketer, bar: &Bar, cancel: &Cancel) -> Result<()> {
-    let (tx, rx) = crossbeam_channel::bounded::<Result<(usize, PointChunk)>>(0);
+    let (tx, rx) = crossbeam_channel::bounded::<Result<(usize, PointChunk, usize)>>(0);
     std::thread::scope(|s| -> Result<()> {
         // Owning the receiver here drops it on any early return, which stops the reader.
         let rx = rx;
@@ -57,7 +58,7 @@ fn bucket_files(files: &[PathBuf], filter: &Filter, b: &mut Bucketer, bar: &Bar,
                     let mut chunk = PointChunk::default();
                     match r.read_chunk(io::DEFAULT_CHUNK, &mut chunk) {
                         Ok(0) => break,
-                        Ok(_) if tx.send(Ok((fi, chunk))).is_ok() => {}
+                        Ok(records) if tx.send(Ok((fi, chunk, records))).is_ok() => {}
                         Ok(_) => return,
                         Err(e) => return drop(tx.send(Err(e))),
                     }
@@ -65,8 +66,9 @@ fn bucket_files(files: &[PathBuf], filter: &Filter, b: &mut Bucketer, bar: &Bar,
             }
         });
         for msg in rx.iter() {
-            let (fi, chunk) = msg?;
-            add(b, fi, &chunk, bar, cancel)?;
+            let (fi, chunk, records) = msg?;
+            add(b, fi, &chunk, cancel)?;
+            bar.inc(records as u64);
         }
         // (A reader that panicked ended the loop early: the points after it are missing.)
         reader.join().map_err(|p| Error::panic("input reader", p))
