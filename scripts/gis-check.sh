@@ -39,7 +39,7 @@ for run in "$@"; do
     count=$(grep -o 'Feature Count: [0-9]*' <<<"$info" | grep -o '[0-9]*$')
     # The layer's CRS as GDAL reads it: its root EPSG code (the last ID or AUTHORITY).
     seen=$(grep -oE '(ID\["EPSG",|AUTHORITY\["EPSG",")[0-9]+' <<<"$info" | tail -1 | grep -oE '[0-9]+$' || true)
-    fields=$(grep -cE '^(id|closed|length|confidence|angle|start|end|corners): ' <<<"$info" || true)
+    fields=$(grep -cE '^(id|closed|length|confidence|angle|shape|start|end|corners): ' <<<"$info" || true)
     gdal_name=$(sed -n '/Layer SRS WKT/{n;p;q}' <<<"$info" | cut -d'"' -f2)
     verdict=ok
     [ "$count" = "$curves" ] || verdict=FAIL
@@ -53,7 +53,7 @@ for run in "$@"; do
       crs="\"$gdal_name\" (run: none; GDAL's default)"
     fi
     # (A run without curves has no fields to show; GeoPackage keeps the id as its FID.)
-    want=8; [ "$ext" = gpkg ] && want=7; [ "$curves" = 0 ] && want=0
+    want=9; [ "$ext" = gpkg ] && want=8; [ "$curves" = 0 ] && want=0
     [ "$fields" -ge "$want" ] || verdict=FAIL
     [ "$verdict" = ok ] || status=1
     printf '%-4s %-36s %-7s features %s/%s  fields %s  CRS %s\n' "$verdict" "$(basename "$run")" "$ext" "$count" "$curves" "$fields" "$crs"

@@ -92,6 +92,10 @@ pub fn render_text(infos: &[FileInfo]) -> String {
         let _ = writeln!(s, "  min      {:.3} {:.3} {:.3}", b.min[0], b.min[1], b.min[2]);
         let _ = writeln!(s, "  max      {:.3} {:.3} {:.3}", b.max[0], b.max[1], b.max[2]);
         let _ = writeln!(s, "  crs      {}", h.crs.summary());
+        if let Some(first) = h.scanners.first() {
+            let more = if h.scanners.len() > 1 { format!(" and {} more", h.scanners.len() - 1) } else { String::new() };
+            let _ = writeln!(s, "  scanners at {:.3} {:.3} {:.3}{more}", first.x, first.y, first.z);
+        }
         let _ = writeln!(s, "  spacing  {:.4} (from {} points)", i.spacing, i.spacing_sample);
     }
     s

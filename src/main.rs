@@ -492,6 +492,13 @@ struct ExtractArgs {
     /// --min-confidence; no reprojection).
     #[arg(long, value_name = "EPSG:N|WKT", value_parser = parse_crs)]
     a_srs: Option<Box<crease::crs::Crs>>,
+    /// Where the scanners saw the surfaces from, which tells convex curves from concave ones
+    /// (each curve's `shape`): `up` for airborne lidar and ground seen from above, scanner
+    /// positions X,Y,Z (several separated by `;`; each vertex takes the nearest), or
+    /// `unknown`. Default: the scan positions of E57 inputs, else unknown. An output setting,
+    /// as --min-confidence.
+    #[arg(long, value_name = "up|X,Y,Z[;X,Y,Z]|unknown", value_parser = crease::curves::Outside::parse)]
+    outside: Option<crease::curves::Outside>,
 }
 
 #[derive(Args)]
@@ -575,6 +582,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         min_confidence,
         min_length,
         a_srs,
+        outside,
     } = a;
     if !(0.0..=1.0).contains(&min_confidence) {
         return Err(Error::Usage("--min-confidence must be between 0 and 1".into()));
@@ -612,6 +620,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         min_length,
         warn,
         assign_crs: a_srs.map(|c| *c),
+        outside,
         recursive,
         formats: format,
         work_dir: None,
@@ -659,8 +668,12 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
             summaries.push(serde_json::json!({"dir": dir, "outputs": outputs, "report": r}));
         }
         if !quiet {
+            let shapes = match r.outside {
+                crease::curves::Outside::Unknown => String::new(),
+                _ => format!(" ({} convex, {} concave)", r.shapes.convex, r.shapes.concave),
+            };
             eprintln!(
-                "{} curves from {} points in {:.2} s ({} tiles{}; kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
+                "{} curves{shapes} from {} points in {:.2} s ({} tiles{}; kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
                 r.counts.curves,
                 r.counts.points,
                 r.total_seconds,

@@ -138,6 +138,10 @@ pub struct CloudHeader {
     pub crs: Crs,
     /// How the file stores coordinates.
     pub precision: Precision,
+    /// Where the scanner stood for each scan the file holds, if it says (E57 scan poses):
+    /// what tells convex creases from concave ones (see [`crate::curves::Outside`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scanners: Vec<glam::DVec3>,
 }
 
 /// How a file stores coordinates, which sets the smallest step between two positions.

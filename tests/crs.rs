@@ -104,6 +104,8 @@ fn a_wkt_in_a_later_evlr_names_every_output() {
                 assert!((stated - length).abs() < 1e-9 * length, "curve {lines}: length {stated}, vertices {length}");
                 let dxf::XDataItem::Real(angle) = value("angle") else { panic!("curve {lines}: angle is not a real") };
                 assert!((angle - 90.0).abs() < 5.0, "curve {lines}: a cube edge at {angle} degrees");
+                // (No scanner position is known for a LAS file unless given.)
+                assert_eq!(value("shape"), dxf::XDataItem::Str("unknown".into()));
                 assert_eq!((value("start"), value("end")), (dxf::XDataItem::Str("corner".into()), dxf::XDataItem::Str("corner".into())));
                 lines += 1;
             }

@@ -51,9 +51,13 @@ fn an_e57_gives_the_curves_of_the_same_points_in_ply() {
     let read = crease::io::read_all(std::slice::from_ref(&e57), &crease::io::Filter::default()).unwrap();
     assert_eq!(read.xyz, cube, "poses applied exactly, points without a return left out");
 
-    let runs = [("e57", &e57), ("ply", &ply)].map(|(name, input)| {
+    // (Both scans are centred on the cube's corner: their scanners stood there, as far as the
+    // file says, and the PLY run is told so.)
+    let runs = [("e57", &e57, None), ("ply", &ply, Some("--outside=0,0,0"))].map(|(name, input, outside)| {
         let run = d.path().join(name);
-        let (code, err) = crease(&["extract", input.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]);
+        let mut args = vec!["extract", input.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"];
+        args.extend(outside);
+        let (code, err) = crease(&args);
         assert_eq!(code, 0, "{err}");
         run
     });
@@ -99,4 +103,53 @@ fn coordinate_metadata_names_the_crs_when_it_is_a_code_or_a_wkt() {
         assert_eq!(crs.epsg, epsg, "{metadata}");
         assert_eq!(crs.wkt.is_some(), metadata == wkt, "{metadata}");
     }
+}
+
+/// An E57 scan's pose places its scanner, which tells convex creases from concave ones: a step
+/// (an L-shaped prism) scanned from (3, 3, 3), its scan stored about the scanner and turned half
+/// a turn, gives the curves, shapes included, of the same points in PLY told where the scanner
+/// stood; its inside corner reads concave.
+#[test]
+fn an_e57_scan_pose_tells_convex_from_concave() {
+    let d = tempfile::tempdir().unwrap();
+    let step = crease::synth::sample(&crease::synth::shapes::shape("step", 90.0).unwrap(), &crease::synth::SynthOptions { n: 60_000, ..Default::default() });
+    let at = DVec3::new(3.0, 3.0, 3.0);
+    let e57 = d.path().join("step.e57");
+    let mut w = E57Writer::from_file(&e57, "crease-test-file").unwrap();
+    let mut scan = w.add_pointcloud("scan", vec![Record::CARTESIAN_X_F64, Record::CARTESIAN_Y_F64, Record::CARTESIAN_Z_F64]).unwrap();
+    scan.set_transform(Some(Transform { rotation: Quaternion { w: 0.0, x: 0.0, y: 0.0, z: 1.0 }, translation: Translation { x: at.x, y: at.y, z: at.z } }));
+    for p in &step {
+        let q = *p - at;
+        scan.add_point(vec![RecordValue::Double(-q.x), RecordValue::Double(-q.y), RecordValue::Double(q.z)]).unwrap();
+    }
+    scan.finalize().unwrap();
+    w.finalize().unwrap();
+    assert_eq!(crease::io::read_header(&e57).unwrap().scanners, vec![at]);
+    // (The points as the E57 reader gives them, pose applied, so that both runs see the same.)
+    let read = crease::io::read_all(std::slice::from_ref(&e57), &crease::io::Filter::default()).unwrap();
+    let ply = d.path().join("step.ply");
+    let mut w = crease::io::PointWriter::create(&ply, &crease::io::WriteOptions { scale: 1e-6, offset: DVec3::ZERO, epsg: None }).unwrap();
+    w.write(&read.xyz, &read.class).unwrap();
+    w.finish().unwrap();
+
+    let runs = [("e57", &e57, None), ("ply", &ply, Some("--outside=3,3,3"))].map(|(name, input, outside)| {
+        let run = d.path().join(name);
+        let mut args = vec!["extract", input.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"];
+        args.extend(outside);
+        let (code, err) = crease(&args);
+        assert_eq!(code, 0, "{err}");
+        run
+    });
+    for f in ["curves.obj", "curves.ply", "curves.geojson"] {
+        assert_eq!(std::fs::read(runs[0].join(f)).unwrap(), std::fs::read(runs[1].join(f)).unwrap(), "{f}");
+    }
+    let curves = crease::curves::read_obj(&runs[0].join("curves.obj")).unwrap();
+    let corner =
+        curves.iter().find(|c| c.vertices.iter().all(|v| (v.p.x - 0.4).abs() < 0.05 && (v.p.y - 0.4).abs() < 0.05)).expect("the inside corner's curve");
+    assert_eq!(corner.shape, crease::curves::Shape::Concave);
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(runs[0].join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["outside"]["scanners"], serde_json::json!([[3.0, 3.0, 3.0]]));
+    let shapes = &report["shapes"];
+    assert_eq!(shapes["convex"].as_u64().unwrap() + shapes["concave"].as_u64().unwrap() + shapes["unknown"].as_u64().unwrap(), curves.len() as u64);
+    assert!(shapes["convex"].as_u64().unwrap() >= 12, "{shapes}");
 }

@@ -255,3 +255,38 @@ fn a_curve_states_the_dihedral_angle_of_its_crease() {
         }
     }
 }
+
+/// Seen from where a scanner stood, each crease of the step (an L-shaped prism) reads convex or
+/// concave as it is: the inside corner of the L concave, every other edge that the scanner sees
+/// a surface of convex, clean and under noise. Edges whose both surfaces face away from the
+/// scanner were not seen by it, and are not checked. Seen from above, the top's outline is
+/// convex and the vertical edges are not told.
+#[test]
+fn a_curve_states_whether_its_crease_is_convex_or_concave() {
+    use crease::curves::{Outside, Shape};
+    let step = shape("step", 90.0).unwrap();
+    let scanner = Outside::Scanners(vec![DVec3::new(3.0, 3.0, 3.0)]);
+    let near = |a: f64, b: f64| (a - b).abs() < 0.05;
+    for noise in [0.0, 0.01] {
+        let pts = synth::sample(&step, &SynthOptions { n: 100_000, noise, seed: 3, ..Default::default() });
+        let curves = extract(&pts, &Params::default()).curves;
+        let (mut checked, mut vertical) = (0, 0);
+        for c in &curves {
+            let m = c.vertices[c.vertices.len() / 2].p;
+            let (first, last) = (c.vertices[0].p, c.vertices[c.vertices.len() - 1].p);
+            let unseen = (near(m.x, 0.0) && near(m.y, 0.0)) || (near(m.z, 0.0) && (near(m.x, 0.0) || near(m.y, 0.0)));
+            if !unseen {
+                let truth = if near(m.x, 0.4) && near(m.y, 0.4) { Shape::Concave } else { Shape::Convex };
+                assert_eq!(scanner.shape(c), truth, "noise {noise}: curve {} through {m}", c.id);
+                checked += 1;
+            }
+            if near(m.z, 1.0) && near(first.z, 1.0) && near(last.z, 1.0) {
+                assert_eq!(Outside::Up.shape(c), Shape::Convex, "noise {noise}: top edge {} through {m}", c.id);
+            } else if (last - first).normalize().z.abs() > 0.99 {
+                assert_eq!(Outside::Up.shape(c), Shape::Unknown, "noise {noise}: vertical edge {} through {m}", c.id);
+                vertical += 1;
+            }
+        }
+        assert!(checked >= 14 && vertical == 6, "noise {noise}: {checked} curves checked, {vertical} vertical, of {}", curves.len());
+    }
+}

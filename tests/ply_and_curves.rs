@@ -1,6 +1,6 @@
 //! PLY point input in every encoding, and curve output round trips.
 
-use crease::curves::{read_obj, read_ply, write_geojson, write_obj, write_ply, Polyline, Vertex};
+use crease::curves::{read_obj, read_ply, write_geojson, write_obj, write_ply, Polyline, Shape, Vertex};
 use crease::io::{Filter, PointReader};
 use crease::points::PointChunk;
 use glam::{DVec3, Vec3};
@@ -89,6 +89,7 @@ fn sample_curves() -> Vec<Polyline> {
                 Vertex { p: DVec3::new(1.0 / 3.0, 2.0, 1e7 + 0.123), n: [n(1.0, 0.0, 0.0), n(0.0, 1.0, 0.0)], corner: false },
             ],
             confidence: 0.8125,
+            shape: Shape::Convex,
         },
         Polyline {
             id: 7,
@@ -99,6 +100,7 @@ fn sample_curves() -> Vec<Polyline> {
                 Vertex { p: DVec3::new(-5.0, 5.0, 0.5), n: [n(0.0, 0.0, 1.0), n(0.0, 1.0, 0.0)], corner: false },
             ],
             confidence: 0.1,
+            shape: Shape::Unknown,
         },
     ]
 }
@@ -124,6 +126,7 @@ fn obj_curves_round_trip_positions_ids_and_shared_corners() {
         assert_eq!(a.id, b.id);
         assert_eq!(a.closed, b.closed);
         assert_eq!(a.confidence, b.confidence, "the confidence comment round-trips");
+        assert_eq!(a.shape, b.shape, "the shape comment round-trips");
         let pa: Vec<DVec3> = a.vertices.iter().map(|v| v.p).collect();
         let pb: Vec<DVec3> = b.vertices.iter().map(|v| v.p).collect();
         assert_eq!(pa, pb, "positions must round-trip bit for bit");
@@ -155,6 +158,7 @@ fn geojson_carries_crs_and_coordinates() {
     assert_eq!((a["corners"].as_str(), a["start"].as_str(), a["end"].as_str()), (Some("0"), Some("corner"), Some("free")));
     assert_eq!((b["start"].as_str(), b["end"].as_str()), (Some("closed"), Some("closed")));
     assert!((b["angle"].as_f64().unwrap() - 90.0).abs() < 1e-4, "{b}");
+    assert_eq!((a["shape"].as_str(), b["shape"].as_str()), (Some("convex"), Some("unknown")));
     for f in v["features"].as_array().unwrap() {
         assert!(f["properties"].as_object().unwrap().values().all(|p| !p.is_array() && !p.is_object()), "{f}");
     }
@@ -165,37 +169,46 @@ fn geojson_carries_crs_and_coordinates() {
     assert_eq!(v["crs"]["properties"]["name"], "PROJCS[\"NAD83_2011_Nebraska_ft\"]");
 }
 
-/// A curve PLY written before curves had a confidence (crease 0.4, whose first normal was
-/// n1x, n1y, n1z) still reads, each curve at confidence 1.
+/// Curve PLYs of older layouts still read: without the shape (crease 0.7), each curve's shape
+/// unknown; without the confidence either (crease 0.4, whose first normal was n1x, n1y, n1z),
+/// each curve at confidence 1.
 #[test]
-fn ply_without_confidence_still_reads() {
+fn ply_of_older_layouts_still_reads() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path().join("c.ply");
     let curves = sample_curves();
     write_ply(&p, &curves, &Default::default()).unwrap();
-    // Rewrite as the older layout: no confidence property, 4 bytes fewer a vertex.
     let bytes = std::fs::read(&p).unwrap();
     let end = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
     let head = String::from_utf8(bytes[..end].to_vec()).unwrap();
     // The first normal is nx, ny, nz (Open3D, CloudCompare and trimesh read it as the normal);
     // crease 0.5 and earlier named it n1x, n1y, n1z.
     assert!(head.contains("property float nx\nproperty float ny\nproperty float nz\nproperty float n2x\n"), "{head}");
-    let head = head
-        .replace("property float confidence\n", "")
-        .replace("float nx\n", "float n1x\n")
-        .replace("float ny\n", "float n1y\n")
-        .replace("float nz\n", "float n1z\n");
-    let mut old = head.into_bytes();
+    assert!(head.contains("property float confidence\nproperty uchar shape\n"), "{head}");
     let nv: usize = curves.iter().map(|c| c.vertices.len()).sum();
-    for v in 0..nv {
-        old.extend_from_slice(&bytes[end + v * 57..end + v * 57 + 53]);
-    }
-    old.extend_from_slice(&bytes[end + nv * 57..]);
-    std::fs::write(&p, old).unwrap();
-    let back = read_ply(&p).unwrap();
-    assert_eq!(back.len(), 2);
-    for (a, b) in curves.iter().zip(&back) {
-        assert_eq!((a.id, a.closed, &a.vertices), (b.id, b.closed, &b.vertices));
-        assert_eq!(b.confidence, 1.0);
+    // (A vertex is 58 bytes: the confidence is bytes 53-56, the shape byte 57.)
+    for with_confidence in [true, false] {
+        let mut head = head.replace("property uchar shape\n", "");
+        let kept = if with_confidence { 57 } else { 53 };
+        if !with_confidence {
+            head = head
+                .replace("property float confidence\n", "")
+                .replace("float nx\n", "float n1x\n")
+                .replace("float ny\n", "float n1y\n")
+                .replace("float nz\n", "float n1z\n");
+        }
+        let mut old = head.into_bytes();
+        for v in 0..nv {
+            old.extend_from_slice(&bytes[end + v * 58..end + v * 58 + kept]);
+        }
+        old.extend_from_slice(&bytes[end + nv * 58..]);
+        std::fs::write(&p, old).unwrap();
+        let back = read_ply(&p).unwrap();
+        assert_eq!(back.len(), 2);
+        for (a, b) in curves.iter().zip(&back) {
+            assert_eq!((a.id, a.closed, &a.vertices), (b.id, b.closed, &b.vertices));
+            assert_eq!(b.confidence, if with_confidence { a.confidence } else { 1.0 });
+            assert_eq!(b.shape, Shape::Unknown);
+        }
     }
 }

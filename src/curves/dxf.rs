@@ -28,7 +28,7 @@ fn attributes(c: &Polyline) -> XData {
     if let Some(a) = c.mean_dihedral_angle() {
         items.extend([name("angle"), XDataItem::Real(a)]);
     }
-    items.extend([name("start"), name(start), name("end"), name(end), name("corners"), name(&c.corner_list())]);
+    items.extend([name("shape"), name(c.shape.name()), name("start"), name(start), name("end"), name(end), name("corners"), name(&c.corner_list())]);
     XData { application_name: APP.into(), items }
 }
 

@@ -52,7 +52,7 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
             "type": "Feature",
             "properties": {
                 "id": c.id, "closed": c.closed, "length": c.length(), "confidence": c.confidence,
-                "angle": c.mean_dihedral_angle(), "start": start, "end": end, "corners": c.corner_list(),
+                "angle": c.mean_dihedral_angle(), "shape": c.shape.name(), "start": start, "end": end, "corners": c.corner_list(),
             },
             "geometry": {"type": "LineString", "coordinates": coords},
         });

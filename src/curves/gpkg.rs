@@ -65,7 +65,7 @@ pub fn write_gpkg(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
          INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined cartesian SRS', -1, 'NONE', -1, 'undefined', 'undefined cartesian coordinate reference system');
          INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined geographic SRS', 0, 'NONE', 0, 'undefined', 'undefined geographic coordinate reference system');
          CREATE TABLE curves (fid INTEGER PRIMARY KEY AUTOINCREMENT, geom LINESTRINGZ, id INTEGER, closed BOOLEAN, length DOUBLE,
-           confidence DOUBLE, angle DOUBLE, start TEXT, \"end\" TEXT, corners TEXT);",
+           confidence DOUBLE, angle DOUBLE, shape TEXT, start TEXT, \"end\" TEXT, corners TEXT);",
     )
     .map_err(out)?;
     if srs > 0 {
@@ -89,12 +89,23 @@ pub fn write_gpkg(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
     tx.execute("INSERT INTO gpkg_geometry_columns VALUES ('curves', 'geom', 'LINESTRING', ?1, 1, 0)", params![srs]).map_err(out)?;
     {
         let mut insert = tx
-            .prepare("INSERT INTO curves (geom, id, closed, length, confidence, angle, start, \"end\", corners) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)")
+            .prepare("INSERT INTO curves (geom, id, closed, length, confidence, angle, shape, start, \"end\", corners) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)")
             .map_err(out)?;
         for c in curves {
             let [start, end] = c.end_kinds();
             insert
-                .execute(params![geometry(c, srs), c.id, c.closed, c.length(), c.confidence as f64, c.mean_dihedral_angle(), start, end, c.corner_list()])
+                .execute(params![
+                    geometry(c, srs),
+                    c.id,
+                    c.closed,
+                    c.length(),
+                    c.confidence as f64,
+                    c.mean_dihedral_angle(),
+                    c.shape.name(),
+                    start,
+                    end,
+                    c.corner_list()
+                ])
                 .map_err(out)?;
         }
     }

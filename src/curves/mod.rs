@@ -6,12 +6,14 @@ mod geojson;
 mod gpkg;
 mod obj;
 mod ply;
+mod shape;
 
 pub use self::dxf::write_dxf;
 pub use geojson::write_geojson;
 pub use gpkg::write_gpkg;
 pub use obj::{read_obj, write_obj};
 pub use ply::{read_ply, write_ply};
+pub use shape::{Outside, Shape};
 
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
@@ -91,12 +93,15 @@ pub struct Polyline {
     /// How sure crease is that the curve is a feature of the surface, 0 to 1 (1 for curves
     /// not extracted by crease).
     pub confidence: f32,
+    /// Convex or concave, where the scanners' positions tell (see [`Outside::shape`]).
+    #[serde(default)]
+    pub shape: Shape,
 }
 
 impl Polyline {
     /// An open polyline through `points` with unknown normals.
     pub fn from_points(id: u32, points: impl IntoIterator<Item = DVec3>) -> Polyline {
-        Polyline { id, closed: false, vertices: points.into_iter().map(Vertex::at).collect(), confidence: 1.0 }
+        Polyline { id, closed: false, vertices: points.into_iter().map(Vertex::at).collect(), confidence: 1.0, shape: Shape::Unknown }
     }
 
     /// Number of segments (closing segment included).
@@ -124,8 +129,8 @@ impl Polyline {
     /// the crease (90 at a cube's edge, 135 where a chamfer meets a face, towards 180 as the
     /// crease flattens), over the vertices whose normals are known; None if none are. The
     /// normals point away from each other's half-surface (see the edge points of stage 3), so
-    /// the angle is 180 minus the angle between them. Which side of the wedge is solid is not
-    /// known, so a convex and a concave crease of the same opening read the same.
+    /// the angle is 180 minus the angle between them. A convex and a concave crease of the same
+    /// opening read the same (see [`Polyline::shape`]).
     pub fn mean_dihedral_angle(&self) -> Option<f64> {
         let angles: Vec<f64> = self
             .vertices

@@ -1,10 +1,10 @@
 //! Wavefront OBJ polylines: `v x y z` vertices and `l i j k ...` lines, one `o` per curve, with
 //! the curve's confidence in a `# confidence c` comment after it, and its other attributes
-//! (length, mean dihedral angle, end kinds, corner vertices) in a `# length ...` comment (other
+//! (length, mean dihedral angle, shape, end kinds, corner vertices) in a `# length ...` comment (other
 //! readers skip both).
 //! Corner vertices shared by several curves are written once and referenced by each.
 
-use super::{Polyline, Vertex};
+use super::{Polyline, Shape, Vertex};
 use crate::crs::Crs;
 use crate::error::{io_input, Error, Result};
 use glam::DVec3;
@@ -69,7 +69,13 @@ fn write_obj_to(w: &mut impl Write, curves: &[Polyline], crs: &Crs) -> std::io::
         let [start, end] = c.end_kinds();
         let angle = c.mean_dihedral_angle().map_or("unknown".to_string(), |a| format!("{a:.1}"));
         let corners = c.corner_list();
-        writeln!(w, "# length {} angle {angle} start {start} end {end} corners {}", c.length(), if corners.is_empty() { "none" } else { &corners })?;
+        writeln!(
+            w,
+            "# length {} angle {angle} shape {} start {start} end {end} corners {}",
+            c.length(),
+            c.shape.name(),
+            if corners.is_empty() { "none" } else { &corners }
+        )?;
         write!(w, "l")?;
         for i in idx {
             write!(w, " {i}")?;
@@ -85,9 +91,10 @@ fn write_obj_to(w: &mut impl Write, curves: &[Polyline], crs: &Crs) -> std::io::
 pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
     let f = std::fs::File::open(path).map_err(|e| io_input(path, e))?;
     let mut verts: Vec<DVec3> = Vec::new();
-    let mut lines: Vec<(Option<u32>, f32, Vec<usize>)> = Vec::new();
+    let mut lines: Vec<(Option<u32>, f32, Shape, Vec<usize>)> = Vec::new();
     let mut pending_id: Option<u32> = None;
     let mut pending_confidence = 1.0;
+    let mut pending_shape = Shape::Unknown;
     for (no, line) in BufReader::new(f).lines().enumerate() {
         let line = line.map_err(|e| io_input(path, e))?;
         let mut t = line.split_whitespace();
@@ -103,9 +110,20 @@ pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
             Some("o") | Some("g") => {
                 pending_id = t.next().and_then(|n| n.strip_prefix("curve_")).and_then(|s| s.parse().ok());
             }
-            Some("#") if t.next() == Some("confidence") => {
-                pending_confidence = t.next().and_then(|s| s.parse().ok()).filter(|c: &f32| c.is_finite()).ok_or_else(|| bad("bad confidence"))?;
-            }
+            Some("#") => match t.next() {
+                Some("confidence") => {
+                    pending_confidence = t.next().and_then(|s| s.parse().ok()).filter(|c: &f32| c.is_finite()).ok_or_else(|| bad("bad confidence"))?;
+                }
+                // (`# length L angle A shape S ...`: the shape is the word after `shape`.)
+                Some("length") => {
+                    pending_shape = match t.skip_while(|w| *w != "shape").nth(1) {
+                        Some("convex") => Shape::Convex,
+                        Some("concave") => Shape::Concave,
+                        _ => Shape::Unknown,
+                    };
+                }
+                _ => {}
+            },
             Some("l") => {
                 let mut idx = Vec::new();
                 for s in t {
@@ -118,13 +136,13 @@ pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
                     }
                     idx.push(i as usize);
                 }
-                lines.push((pending_id.take(), std::mem::replace(&mut pending_confidence, 1.0), idx));
+                lines.push((pending_id.take(), std::mem::replace(&mut pending_confidence, 1.0), std::mem::take(&mut pending_shape), idx));
             }
             _ => {}
         }
     }
     let mut uses = vec![0u32; verts.len()];
-    for (_, _, idx) in &lines {
+    for (_, _, _, idx) in &lines {
         let n = idx.len();
         let closed = n > 2 && idx[0] == idx[n - 1];
         let end = if closed { n - 1 } else { n };
@@ -136,13 +154,13 @@ pub fn read_obj(path: &Path) -> Result<Vec<Polyline>> {
         }
     }
     let mut out = Vec::with_capacity(lines.len());
-    for (k, (id, confidence, mut idx)) in lines.into_iter().enumerate() {
+    for (k, (id, confidence, shape, mut idx)) in lines.into_iter().enumerate() {
         let closed = idx.len() > 2 && idx[0] == idx[idx.len() - 1];
         if closed {
             idx.pop();
         }
         let vertices = idx.iter().map(|&i| Vertex { corner: uses[i] > 1, ..Vertex::at(verts[i]) }).collect();
-        out.push(Polyline { id: id.unwrap_or(k as u32), closed, vertices, confidence });
+        out.push(Polyline { id: id.unwrap_or(k as u32), closed, vertices, confidence, shape });
     }
     Ok(out)
 }

@@ -1,11 +1,11 @@
 //! Binary PLY polylines: a `vertex` element (x, y, z as double; the two surface normals as
 //! float, the first as nx, ny, nz and the second as n2x, n2y, n2z; curve id; corner flag; the
-//! curve's confidence as float) and an `edge` element
-//! (vertex1, vertex2). Each curve's vertices are stored in order; a closed curve has one more
-//! edge than an open one. (Files of crease 0.4 and earlier, without the confidence, are read
-//! too.)
+//! curve's confidence as float and its shape as uchar: 0 unknown, 1 convex, 2 concave) and an
+//! `edge` element (vertex1, vertex2). Each curve's vertices are stored in order; a closed curve
+//! has one more edge than an open one. (Files of crease 0.4 and earlier, without the
+//! confidence, and of 0.7 and earlier, without the shape, are read too.)
 
-use super::{Polyline, Vertex};
+use super::{Polyline, Shape, Vertex};
 use crate::crs::Crs;
 use crate::error::{io_input, Error, Result};
 use glam::{DVec3, Vec3};
@@ -24,7 +24,25 @@ property float n1x\nproperty float n1y\nproperty float n1z\n\
 property float n2x\nproperty float n2y\nproperty float n2z\n\
 property int curve\nproperty uchar corner\n";
 const CONFIDENCE: &str = "property float confidence\n";
-const VERTEX_BYTES: usize = 3 * 8 + 6 * 4 + 4 + 1 + 4;
+const SHAPE: &str = "property uchar shape\n";
+/// Bytes of a vertex with the confidence and the shape.
+const VERTEX_BYTES: usize = 3 * 8 + 6 * 4 + 4 + 1 + 4 + 1;
+
+fn shape_code(s: Shape) -> u8 {
+    match s {
+        Shape::Unknown => 0,
+        Shape::Convex => 1,
+        Shape::Concave => 2,
+    }
+}
+
+fn shape_of(code: u8) -> Shape {
+    match code {
+        1 => Shape::Convex,
+        2 => Shape::Concave,
+        _ => Shape::Unknown,
+    }
+}
 
 /// Writes `curves` to `path` as binary little-endian PLY.
 pub fn write_ply(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
@@ -39,7 +57,7 @@ pub fn write_ply(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
             // the GeoJSON.)
             writeln!(w, "comment crs {}", crs.summary().replace(['\n', '\r'], " "))?;
         }
-        write!(w, "element vertex {nv}\n{HEADER}{CONFIDENCE}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n")?;
+        write!(w, "element vertex {nv}\n{HEADER}{CONFIDENCE}{SHAPE}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n")?;
         for c in curves {
             for v in &c.vertices {
                 for x in v.p.to_array() {
@@ -53,6 +71,7 @@ pub fn write_ply(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
                 w.write_all(&(c.id as i32).to_le_bytes())?;
                 w.write_all(&[v.corner as u8])?;
                 w.write_all(&c.confidence.to_le_bytes())?;
+                w.write_all(&[shape_code(c.shape)])?;
             }
         }
         let mut base = 0i32;
@@ -89,7 +108,8 @@ pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
     };
     let (nv, ne) = (count("vertex")?, count("edge")?);
     let with_confidence = head.contains(&format!("{properties}{CONFIDENCE}"));
-    let vertex_bytes = if with_confidence { VERTEX_BYTES } else { VERTEX_BYTES - 4 };
+    let with_shape = head.contains(&format!("{properties}{CONFIDENCE}{SHAPE}"));
+    let vertex_bytes = VERTEX_BYTES - if with_confidence { 0 } else { 4 } - if with_shape { 0 } else { 1 };
     let body = &bytes[end + 11..];
     if body.len() < nv * vertex_bytes + ne * 8 {
         return Err(bad("truncated PLY data"));
@@ -107,8 +127,9 @@ pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
         let id = i32_at(o + 48) as u32;
         let corner = body[o + 52] != 0;
         let confidence = if with_confidence { f32_at(o + 53) } else { 1.0 };
+        let shape = if with_shape { shape_of(body[o + 57]) } else { Shape::Unknown };
         if curves.last().map(|c| c.id) != Some(id) {
-            curves.push(Polyline { id, closed: false, vertices: vec![], confidence });
+            curves.push(Polyline { id, closed: false, vertices: vec![], confidence, shape });
             first_vertex.push(i);
         }
         curves.last_mut().unwrap().vertices.push(Vertex { p, n: [n1, n2], corner });

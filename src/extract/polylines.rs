@@ -229,13 +229,20 @@ impl Gathered {
 pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
     let mut prev: Option<[DVec3; 2]> = None;
     let mut n: Vec<[DVec3; 2]> = vec![[DVec3::ZERO; 2]; c.v.len()];
+    // (Vertices whose own orientation was kept, less those whose pair was turned round.)
+    let mut kept = 0i64;
     for (i, m) in g.normals.iter().enumerate() {
         if m[0] != glam::Vec3::ZERO && !c.corner[i] {
             let m = m.map(|x| x.as_dvec3());
-            let m = prev.map_or(m, |p| carry(m, p));
+            let (m, turned) = prev.map_or((m, false), |p| carry(m, p));
+            kept += if turned { -1 } else { 1 };
             n[i] = m;
             prev = Some(m);
         }
+    }
+    // The curve takes the orientation most of its vertices have, not its first vertex's.
+    if kept < 0 {
+        n.iter_mut().for_each(|m| *m = [-m[0], -m[1]]);
     }
     fill_from_neighbours(&mut n);
     let length = c.v.windows(2).map(|w| w[0].distance(w[1])).sum::<f64>() + if c.closed && c.v.len() > 2 { c.v[0].distance(c.v[c.v.len() - 1]) } else { 0.0 };
@@ -245,7 +252,7 @@ pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64
         agreement: g.agreement / g.covered.max(1) as f64,
     };
     let vertices = c.v.iter().zip(&n).zip(&c.corner).map(|((&p, n), &corner)| Vertex { p: p + origin, n: [n[0].as_vec3(), n[1].as_vec3()], corner }).collect();
-    Polyline { id, closed: c.closed, vertices, confidence: evidence.confidence() as f32 }
+    Polyline { id, closed: c.closed, vertices, confidence: evidence.confidence() as f32, shape: crate::curves::Shape::Unknown }
 }
 
 /// Gives each vertex without normals (corners, and vertices with no edge point near) those of
@@ -332,13 +339,13 @@ fn align(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
 
 /// Orders the normal pair `n` to match `reference`, and turns both normals round where they
 /// point away from it: the pair keeps its own orientation (each normal away from the other's
-/// half-surface), which the dihedral angle is read from.
-fn carry(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
+/// half-surface), which the dihedral angle is read from. True with the pair if it was turned.
+fn carry(n: [DVec3; 2], reference: [DVec3; 2]) -> ([DVec3; 2], bool) {
     let [a, b] = order(n, reference);
     if a.dot(reference[0]) + b.dot(reference[1]) < 0.0 {
-        [-a, -b]
+        ([-a, -b], true)
     } else {
-        [a, b]
+        ([a, b], false)
     }
 }
 

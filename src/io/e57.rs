@@ -21,6 +21,26 @@ fn e57_error(path: &Path, e: e57::Error) -> Error {
     Error::input(path, format!("invalid E57 file: {}", e.to_string().replace('\n', " ")))
 }
 
+/// Where the scanner of scan `c` stood, in the file's coordinates, if the file tells. A scan's
+/// own coordinates are centred on its scanner, and its pose's translation places that centre:
+/// by definition for a scan stored in spherical coordinates; for one in Cartesian coordinates
+/// unless its bounds lie more than ten times their size from the centre (a scan exported in a
+/// map's coordinates without a pose, whose origin is no scanner), or, without bounds, if it
+/// has a pose.
+fn scanner(c: &e57::PointCloud) -> Option<DVec3> {
+    let bounds = c.cartesian_bounds.as_ref().and_then(|b| {
+        let lo = DVec3::new(b.x_min?, b.y_min?, b.z_min?);
+        let hi = DVec3::new(b.x_max?, b.y_max?, b.z_max?);
+        Some((lo, hi))
+    });
+    let centred = c.has_spherical()
+        || match bounds {
+            Some((lo, hi)) => DVec3::ZERO.max(lo).min(hi).length() <= 10.0 * lo.distance(hi),
+            None => c.transform.is_some(),
+        };
+    centred.then(|| c.transform.as_ref().map_or(DVec3::ZERO, |t| DVec3::new(t.translation.x, t.translation.y, t.translation.z)))
+}
+
 /// A chunk of decoded points and the records it came from.
 type Decoded = Result<(PointChunk, u64)>;
 
@@ -61,6 +81,7 @@ impl E57Reader {
             crs,
             // (Poses are applied in double precision.)
             precision: Precision::Float(52),
+            scanners: clouds.iter().filter_map(scanner).collect(),
         };
         Ok(E57Reader { path: path.to_path_buf(), header, decoded: None, pending: PointChunk::default(), at: 0, next: 0, chunk_end: 0 })
     }

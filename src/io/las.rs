@@ -266,6 +266,7 @@ fn cloud_header(path: &Path, p: &Parsed) -> Result<CloudHeader> {
         bounds,
         crs: p.crs.clone(),
         precision: Precision::Scaled(p.layout.scale.max_element()),
+        scanners: vec![],
     })
 }
 

@@ -237,6 +237,7 @@ impl PlyReader {
             bounds: Bounds::EMPTY,
             crs: Crs::default(),
             precision: precision(xyz.map(|i| vertex.props[i].ty)),
+            scanners: vec![],
         };
         #[cfg(unix)]
         let _ = map.advise(memmap2::Advice::Sequential);

@@ -105,6 +105,7 @@ impl TextReader {
             bounds: Bounds::EMPTY,
             crs: Crs::default(),
             precision: Precision::Float(52),
+            scanners: vec![],
         };
         Ok(TextReader { path: path.to_path_buf(), header, map: Some(map), cols, pos: 0, line: 0, next: 0 })
     }

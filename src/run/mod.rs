@@ -32,7 +32,7 @@ pub use plan::{tile_size_for, BYTES_PER_POINT, MAX_TILE_POINTS};
 pub use status::{render_status, status, Status};
 
 use crate::cancel::Cancel;
-use crate::curves::{Format, Polyline};
+use crate::curves::{Format, Outside, Polyline, Shape};
 use crate::debug::DebugDump;
 use crate::error::{Error, Result};
 use crate::extract::candidates::{self, ResidualSum};
@@ -78,6 +78,9 @@ pub struct RunOptions {
     pub warn: fn(&str),
     /// The CRS of the outputs whatever the inputs say (an output setting, as `--a-srs`).
     pub assign_crs: Option<Crs>,
+    /// Where the scanners saw the surfaces from, which tells convex curves from concave ones
+    /// (an output setting); None takes the scanner positions the inputs give (E57), if any.
+    pub outside: Option<Outside>,
     /// Input directories are searched in their subdirectories too.
     pub recursive: bool,
     /// The curve files written (an output setting).
@@ -151,6 +154,7 @@ impl Default for RunOptions {
             min_length: 0.0,
             warn: |_| {},
             assign_crs: None,
+            outside: None,
             recursive: false,
             formats: Format::DEFAULT.to_vec(),
             work_dir: None,
@@ -208,6 +212,28 @@ pub struct Report {
     pub warnings: Vec<String>,
     /// The outputs' CRS, with its units (lengths in this report are in the horizontal unit).
     pub crs: Crs,
+    /// Where the scanners saw the surfaces from (`--outside`, or the inputs' scan positions).
+    pub outside: Outside,
+    /// Curves written, by shape.
+    pub shapes: ShapeCounts,
+}
+
+/// Curves written, by [`Shape`].
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ShapeCounts {
+    /// Convex curves.
+    pub convex: u64,
+    /// Concave curves.
+    pub concave: u64,
+    /// Curves whose shape was not told.
+    pub unknown: u64,
+}
+
+impl ShapeCounts {
+    fn of(curves: &[Polyline]) -> ShapeCounts {
+        let count = |s: Shape| curves.iter().filter(|c| c.shape == s).count() as u64;
+        ShapeCounts { convex: count(Shape::Convex), concave: count(Shape::Concave), unknown: count(Shape::Unknown) }
+    }
 }
 
 /// Seconds per pass.
@@ -385,21 +411,36 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
     };
     let tau = run.tau;
-    let Some((curves, counts, seconds)) = run.curves(&r)? else {
+    let Some((mut curves, counts, seconds)) = run.curves(&r)? else {
         return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
     };
     for h in &headers {
         warnings.extend(coarse_coordinates(h, &run.manifest.grid, r.kappa));
     }
+    let outside = opts.outside.clone().unwrap_or_else(|| scanned_from(&headers));
+    outside.label(&mut curves);
     run.write(&curves, &crs)?;
     let mut report = run.report(files, r, tau, counts, seconds, t0, resumed);
     report.warnings = warnings.into_list();
     report.crs = crs;
+    report.shapes = ShapeCounts::of(&curves);
+    report.outside = outside;
     run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
     if opts.clean {
         run.clean()?;
     }
     Ok(WorkerStep::Finished(Box::new(report)))
+}
+
+/// Where the inputs say their scanners stood: [`Outside::Scanners`] if any file gives scan
+/// positions (E57), else [`Outside::Unknown`].
+fn scanned_from(headers: &[crate::points::CloudHeader]) -> Outside {
+    let scanners: Vec<DVec3> = headers.iter().flat_map(|h| h.scanners.iter().copied()).collect();
+    if scanners.is_empty() {
+        Outside::Unknown
+    } else {
+        Outside::Scanners(scanners)
+    }
 }
 
 /// Warnings of a run: each is passed to the run's handler as it is found, and listed in the
@@ -949,6 +990,8 @@ impl<'a> Run<'a> {
             repaired: self.repaired.clone(),
             warnings: vec![],
             crs: Crs::default(),
+            outside: Outside::Unknown,
+            shapes: ShapeCounts::default(),
         }
     }
 }
