@@ -155,21 +155,34 @@ impl<'a> NearEdges<'a> {
     /// The normal pairs of the edge points within half a step of `p`, the first point's first,
     /// each ordered and signed to agree with the first's.
     fn pairs_at(&self, p: DVec3, nn: &mut Vec<(u32, f32)>) -> Vec<[DVec3; 2]> {
+        let own = self.own_pairs_at(p, nn);
+        own.first().map_or(vec![], |&f| own.iter().map(|&n| align(n, f)).collect())
+    }
+
+    /// The mean normal pair of the edge points within half a step of `p`, if any, oriented as
+    /// most of those points orient theirs (see [`Orientation`]).
+    pub fn normals_at(&self, p: DVec3) -> Option<[DVec3; 2]> {
+        let own = self.own_pairs_at(p, &mut vec![]);
+        let first = *own.first()?;
+        let mut votes = Orientation::default();
+        let sum = own.iter().fold([DVec3::ZERO; 2], |s, &n| {
+            let (a, turned) = align_turned(n, first);
+            votes.count(turned);
+            [s[0] + a[0], s[1] + a[1]]
+        });
+        let mean = votes.apply([sum[0].normalize_or_zero(), sum[1].normalize_or_zero()]);
+        (mean[0] != DVec3::ZERO).then_some(mean)
+    }
+
+    /// The normal pairs of the edge points within half a step of `p`, as their points have them,
+    /// in point order.
+    fn own_pairs_at(&self, p: DVec3, nn: &mut Vec<(u32, f32)>) -> Vec<[DVec3; 2]> {
         nn.clear();
         if !self.index.is_empty() {
             self.index.within(&p.as_vec3().to_array(), (0.5 * self.step) as f32, nn);
         }
         nn.sort_unstable_by_key(|a| a.0);
-        let pair = |j: u32| self.normals[j as usize].map(|v| v.as_dvec3());
-        nn.first().map_or(vec![], |f| nn.iter().map(|&(j, _)| align(pair(j), pair(f.0))).collect())
-    }
-
-    /// The mean normal pair of the edge points within half a step of `p`, if any.
-    pub fn normals_at(&self, p: DVec3) -> Option<[DVec3; 2]> {
-        let pairs = self.pairs_at(p, &mut vec![]);
-        let sum = pairs.iter().fold([DVec3::ZERO; 2], |s, a| [s[0] + a[0], s[1] + a[1]]);
-        let mean = [sum[0].normalize_or_zero(), sum[1].normalize_or_zero()];
-        (!pairs.is_empty() && mean[0] != DVec3::ZERO).then_some(mean)
+        nn.iter().map(|&(j, _)| self.normals[j as usize].map(|v| v.as_dvec3())).collect()
     }
 
     /// How well the normal pairs of the edge points within half a step of `p` agree with their
@@ -227,23 +240,21 @@ impl Gathered {
 /// the curve (turning both of a pair together), vertices without normals take their
 /// neighbours', and the evidence gives the confidence.
 pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
+    // Each normal is aligned with the one before it along the curve, so that it turns smoothly
+    // round bends; the orientation is then the one most vertices have.
     let mut prev: Option<[DVec3; 2]> = None;
     let mut n: Vec<[DVec3; 2]> = vec![[DVec3::ZERO; 2]; c.v.len()];
-    // (Vertices whose own orientation was kept, less those whose pair was turned round.)
-    let mut kept = 0i64;
+    let mut votes = Orientation::default();
     for (i, m) in g.normals.iter().enumerate() {
         if m[0] != glam::Vec3::ZERO && !c.corner[i] {
             let m = m.map(|x| x.as_dvec3());
-            let (m, turned) = prev.map_or((m, false), |p| carry(m, p));
-            kept += if turned { -1 } else { 1 };
+            let (m, turned) = prev.map_or((m, [false; 2]), |p| align_turned(m, p));
+            votes.count(turned);
             n[i] = m;
             prev = Some(m);
         }
     }
-    // The curve takes the orientation most of its vertices have, not its first vertex's.
-    if kept < 0 {
-        n.iter_mut().for_each(|m| *m = [-m[0], -m[1]]);
-    }
+    n.iter_mut().for_each(|m| *m = votes.apply(*m));
     fill_from_neighbours(&mut n);
     let length = c.v.windows(2).map(|w| w[0].distance(w[1])).sum::<f64>() + if c.closed && c.v.len() > 2 { c.v[0].distance(c.v[c.v.len() - 1]) } else { 0.0 };
     let evidence = Evidence {
@@ -333,19 +344,50 @@ fn order(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
 /// Orders and signs the normal pair `n` to agree with `reference`, each normal on its own (for
 /// comparing pairs).
 fn align(n: [DVec3; 2], reference: [DVec3; 2]) -> [DVec3; 2] {
-    let [a, b] = order(n, reference);
-    [if a.dot(reference[0]) < 0.0 { -a } else { a }, if b.dot(reference[1]) < 0.0 { -b } else { b }]
+    align_turned(n, reference).0
 }
 
-/// Orders the normal pair `n` to match `reference`, and turns both normals round where they
-/// point away from it: the pair keeps its own orientation (each normal away from the other's
-/// half-surface), which the dihedral angle is read from. True with the pair if it was turned.
-fn carry(n: [DVec3; 2], reference: [DVec3; 2]) -> ([DVec3; 2], bool) {
+/// As [`align`], and which of the two normals were turned round.
+fn align_turned(n: [DVec3; 2], reference: [DVec3; 2]) -> ([DVec3; 2], [bool; 2]) {
     let [a, b] = order(n, reference);
-    if a.dot(reference[0]) + b.dot(reference[1]) < 0.0 {
-        ([-a, -b], true)
-    } else {
-        ([a, b], false)
+    let turned = [a.dot(reference[0]) < 0.0, b.dot(reference[1]) < 0.0];
+    ([if turned[0] { -a } else { a }, if turned[1] { -b } else { b }], turned)
+}
+
+/// The orientation of a run of normal pairs, by vote. Each pair, as its edge point or vertex
+/// has it, has both normals pointing away from the other's half-surface (see stage 3). Aligned
+/// normal by normal to a reference, the pairs then differ from their own orientation by one of
+/// four turns: none or both (pairs oriented as the reference, or the other way round), or one
+/// normal alone (a pair whose orientation noise got wrong, or a wrong reference). The turn
+/// most pairs agree on, within the pattern (none or both, or one alone) most pairs share,
+/// restores their orientation; a pair that noise got wrong, or a wrong reference, is outvoted.
+#[derive(Clone, Copy, Debug, Default)]
+struct Orientation {
+    /// Pairs turned: none, both, the first alone, the second alone.
+    votes: [u32; 4],
+}
+
+impl Orientation {
+    fn count(&mut self, turned: [bool; 2]) {
+        self.votes[match turned {
+            [false, false] => 0,
+            [true, true] => 1,
+            [true, false] => 2,
+            [false, true] => 3,
+        }] += 1;
+    }
+
+    /// `n`, aligned as the pairs counted were, turned back to the orientation most had.
+    fn apply(&self, n: [DVec3; 2]) -> [DVec3; 2] {
+        let v = self.votes;
+        let same = v[0] + v[1] >= v[2] + v[3];
+        let turn = match (same, if same { v[1] > v[0] } else { v[3] > v[2] }) {
+            (true, false) => [false, false],
+            (true, true) => [true, true],
+            (false, false) => [true, false],
+            (false, true) => [false, true],
+        };
+        [if turn[0] { -n[0] } else { n[0] }, if turn[1] { -n[1] } else { n[1] }]
     }
 }
 
@@ -364,5 +406,24 @@ mod tests {
         let mut none = vec![z, z];
         fill_from_neighbours(&mut none);
         assert_eq!(none, vec![z, z]);
+    }
+
+    #[test]
+    fn a_curve_takes_the_orientation_most_of_its_vertices_have() {
+        // A crease along x between the faces of a 135 degree wedge: normals (0, 0, 1) and
+        // (0, 0.71, 0.71) point away from each other's half-surface. Noise got the first vertex's
+        // second normal wrong, and turned a later vertex's pair round whole; with the first
+        // vertex as the reference, both stay so, and the first reads a 45 degree crease.
+        let (a, b) = (glam::Vec3::Z, glam::Vec3::new(0.0, 1.0, 1.0).normalize());
+        let mut own = vec![[a, b]; 6];
+        own[0] = [a, -b];
+        own[3] = [-a, -b];
+        let c = complete::Curve::new((0..6).map(|i| DVec3::X * i as f64).collect(), false);
+        let g = Gathered { normals: own, covered: 6, agreement: 6.0 };
+        let line = finish(0, c, g, DVec3::ZERO, 1.0);
+        for v in &line.vertices {
+            assert!(v.n[0].abs_diff_eq(a, 1e-6) && v.n[1].abs_diff_eq(b, 1e-6), "{:?}", v.n);
+        }
+        assert!((line.mean_dihedral_angle().unwrap() - 135.0).abs() < 1e-3);
     }
 }
