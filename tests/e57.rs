@@ -11,6 +11,25 @@ fn crease(args: &[&str]) -> (i32, String) {
     (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
+/// Runs `e57` (its scanners as the file gives them) and `ply` (told they stood at `outside`)
+/// into `dir`, asserts that their curve files are byte-identical, and returns the E57 run.
+fn same_curves(dir: &Path, e57: &Path, ply: &Path, outside: &str) -> std::path::PathBuf {
+    let outside = format!("--outside={outside}");
+    let runs = [("e57", e57, None), ("ply", ply, Some(outside.as_str()))].map(|(name, input, outside)| {
+        let run = dir.join(name);
+        let mut args = vec!["extract", input.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"];
+        args.extend(outside);
+        let (code, err) = crease(&args);
+        assert_eq!(code, 0, "{err}");
+        run
+    });
+    for f in ["curves.obj", "curves.ply", "curves.geojson"] {
+        assert_eq!(std::fs::read(runs[0].join(f)).unwrap(), std::fs::read(runs[1].join(f)).unwrap(), "{f}");
+    }
+    let [e57_run, _] = runs;
+    e57_run
+}
+
 /// A 30,000-point cube written as two scans: the first half as it is, the second in a scanner
 /// frame turned half a turn about z (its pose turns it back, exactly in floating point), with
 /// a point without a return after every tenth point.
@@ -53,18 +72,8 @@ fn an_e57_gives_the_curves_of_the_same_points_in_ply() {
 
     // (Both scans are centred on the cube's corner: their scanners stood there, as far as the
     // file says, and the PLY run is told so.)
-    let runs = [("e57", &e57, None), ("ply", &ply, Some("--outside=0,0,0"))].map(|(name, input, outside)| {
-        let run = d.path().join(name);
-        let mut args = vec!["extract", input.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"];
-        args.extend(outside);
-        let (code, err) = crease(&args);
-        assert_eq!(code, 0, "{err}");
-        run
-    });
-    for f in ["curves.obj", "curves.ply", "curves.geojson"] {
-        assert_eq!(std::fs::read(runs[0].join(f)).unwrap(), std::fs::read(runs[1].join(f)).unwrap(), "{f}");
-    }
-    assert_eq!(crease::curves::read_obj(&runs[0].join("curves.obj")).unwrap().len(), 12);
+    let run = same_curves(d.path(), &e57, &ply, "0,0,0");
+    assert_eq!(crease::curves::read_obj(&run.join("curves.obj")).unwrap().len(), 12);
 
     // Truncated and corrupted: one line naming the file, exit 2, no panic.
     let bytes = std::fs::read(&e57).unwrap();
@@ -132,22 +141,12 @@ fn an_e57_scan_pose_tells_convex_from_concave() {
     w.write(&read.xyz, &read.class).unwrap();
     w.finish().unwrap();
 
-    let runs = [("e57", &e57, None), ("ply", &ply, Some("--outside=3,3,3"))].map(|(name, input, outside)| {
-        let run = d.path().join(name);
-        let mut args = vec!["extract", input.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"];
-        args.extend(outside);
-        let (code, err) = crease(&args);
-        assert_eq!(code, 0, "{err}");
-        run
-    });
-    for f in ["curves.obj", "curves.ply", "curves.geojson"] {
-        assert_eq!(std::fs::read(runs[0].join(f)).unwrap(), std::fs::read(runs[1].join(f)).unwrap(), "{f}");
-    }
-    let curves = crease::curves::read_obj(&runs[0].join("curves.obj")).unwrap();
+    let run = same_curves(d.path(), &e57, &ply, "3,3,3");
+    let curves = crease::curves::read_obj(&run.join("curves.obj")).unwrap();
     let corner =
         curves.iter().find(|c| c.vertices.iter().all(|v| (v.p.x - 0.4).abs() < 0.05 && (v.p.y - 0.4).abs() < 0.05)).expect("the inside corner's curve");
     assert_eq!(corner.shape, crease::curves::Shape::Concave);
-    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(runs[0].join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["outside"]["scanners"], serde_json::json!([[3.0, 3.0, 3.0]]));
     let shapes = &report["shapes"];
     assert_eq!(shapes["convex"].as_u64().unwrap() + shapes["concave"].as_u64().unwrap() + shapes["unknown"].as_u64().unwrap(), curves.len() as u64);
