@@ -311,16 +311,18 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams, cancel: &crate
 /// Connects end `e` of curve `ci` to vertex `vi` of curve `cj`. Returns true if curves changed.
 fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: f64, reach: f64) -> bool {
     let (x, t, _) = curves[ci].end(e);
-    let target = curves[cj].clone();
+    let target = &curves[cj];
     let last = target.v.len() - 1;
     let is_end = !target.closed && (vi == 0 || vi == last);
     if target.corner[vi] {
-        curves[ci].push_end(e, target.v[vi], true);
+        let p = target.v[vi];
+        curves[ci].push_end(e, p, true);
         return true;
     }
     if is_end {
         let te = if vi == 0 { 0 } else { 1 };
         let (y, u, _) = target.end(te);
+        let target_look = target.look(reach);
         if t.dot(u) <= -cos {
             // Opposite tangents: a gap.
             if ci == cj {
@@ -334,7 +336,7 @@ fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: 
         // ahead of both and within each one's look-ahead; otherwise they are left alone.
         let Some(c) = closest_between_lines(x, t, y, u) else { return false };
         let ok = |z: DVec3, d: DVec3, look: f64| (c - z).dot(d) >= -0.25 * look && c.distance(z) <= look;
-        if !ok(x, t, curves[ci].look(reach)) || !ok(y, u, target.look(reach)) {
+        if !ok(x, t, curves[ci].look(reach)) || !ok(y, u, target_look) {
             return false;
         }
         curves[ci].push_end(e, c, true);
@@ -358,7 +360,7 @@ fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: 
     }
     // Interior vertex: split there and make it a corner.
     let corner = target.v[vi];
-    let mut a = curves[cj].clone();
+    let mut a = std::mem::replace(&mut curves[cj], Curve::new(vec![], false));
     if a.closed {
         // Re-open the loop at the corner.
         a.v.rotate_left(vi);
@@ -381,8 +383,8 @@ fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: 
 }
 
 fn join(curves: &mut [Curve], ci: usize, e: usize, cj: usize, f: usize) {
-    let mut a = curves[ci].clone();
-    let mut b = curves[cj].clone();
+    let mut a = std::mem::replace(&mut curves[ci], Curve::new(vec![], false));
+    let mut b = std::mem::replace(&mut curves[cj], Curve::new(vec![], false));
     if e == 0 {
         a.v.reverse();
         a.corner.reverse();
