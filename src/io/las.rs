@@ -9,6 +9,7 @@ use crate::error::{io_input, Error, Result};
 use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk, Precision};
 use glam::DVec3;
 use memmap2::Mmap;
+use rayon::prelude::*;
 use std::fs::File;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
@@ -282,10 +283,16 @@ enum Points {
     Mapped { map: Mmap, offset: usize },
     /// Compressed: the `las` crate decompresses into a reusable buffer.
     Compressed { reader: Box<las::Reader>, buf: las::PointData },
-    /// COPC read with bounds: only the octree nodes that meet them are decompressed, a node a
-    /// chunk, in file order.
-    Copc { reader: Box<las::CopcReader<'static, std::io::BufReader<File>>>, nodes: Vec<Node>, next: usize },
+    /// COPC read with bounds: only the octree nodes that meet them are decompressed, several
+    /// side by side, by readers of their own (opened as needed, one a thread at most), and
+    /// handed on in file order.
+    Copc { readers: Vec<CopcFileReader>, nodes: Vec<Node>, next: usize },
 }
+
+type CopcFileReader = las::CopcReader<'static, std::io::BufReader<File>>;
+
+/// Nodes decompressed side by side, per thread: enough to even out nodes of different sizes.
+const COPC_NODES_PER_THREAD: usize = 4;
 
 /// A COPC octree node with points: its hierarchy entry, and the record index of its first point
 /// (the nodes' points follow each other in file order, so a node read alone gives its points
@@ -341,6 +348,18 @@ fn copc_nodes(path: &Path, bytes: &[u8], header: &las::Header, bounds: &Bounds, 
     Ok(Some(nodes))
 }
 
+/// Opens a reader of the COPC file `path`.
+fn open_copc(path: &Path) -> Result<CopcFileReader> {
+    super::guarded(path, "the COPC reader", || las::CopcReader::from_path(path).map_err(|e| las_error(path, e)))
+}
+
+/// Decompresses the points of COPC node `node` of `path`.
+fn read_node(path: &Path, reader: &mut CopcFileReader, node: &Node) -> Result<las::PointData> {
+    let k = node.entry.key;
+    let corrupt = |e: las::Error| Error::input(path, format!("corrupt compressed point data in COPC node {}-{}-{}-{}: {e}", k.l, k.x, k.y, k.z));
+    super::guarded(path, "the COPC decoder", || reader.read_entry(&node.entry).map_err(corrupt))
+}
+
 /// A chunked reader over one LAS or LAZ file.
 pub struct LasReader {
     path: PathBuf,
@@ -365,8 +384,7 @@ impl LasReader {
         };
         let points = if let Some(nodes) = copc {
             drop(map);
-            let reader = super::guarded(path, "the COPC reader", || las::CopcReader::from_path(path).map_err(|e| las_error(path, e)))?;
-            Points::Copc { reader: Box::new(reader), nodes, next: 0 }
+            Points::Copc { readers: vec![open_copc(path)?], nodes, next: 0 }
         } else if parsed.compressed {
             // Decompression reads the file once, front to back: a buffered reader keeps resident
             // memory bounded, where a map would keep every page touched.
@@ -412,18 +430,38 @@ impl LasReader {
                 let layout = Layout { record_len: buf.record_len(), ..self.layout };
                 layout.decode(buf.raw_bytes(), self.next, out, table, keep_withheld);
             }
-            Points::Copc { reader, nodes, next } => {
-                let Some(node) = nodes.get(*next) else {
+            Points::Copc { readers, nodes, next } => {
+                if *next == nodes.len() {
                     return Ok(0);
-                };
-                *next += 1;
+                }
+                // The next nodes, up to `max` points (at least one node), a few a thread.
+                let threads = rayon::current_num_threads().max(1);
+                let mut end = *next + 1;
+                let mut records = nodes[*next].entry.point_count as u64;
+                while end < nodes.len() && end - *next < COPC_NODES_PER_THREAD * threads && records + nodes[end].entry.point_count as u64 <= max as u64 {
+                    records += nodes[end].entry.point_count as u64;
+                    end += 1;
+                }
+                let batch = &nodes[*next..end];
+                while readers.len() < threads.min(batch.len()) {
+                    readers.push(open_copc(&self.path)?);
+                }
+                // (Reader k takes nodes k, k + R, k + 2R, ... of the batch.)
                 let path = &self.path;
-                let k = node.entry.key;
-                let corrupt = |e: las::Error| Error::input(path, format!("corrupt compressed point data in COPC node {}-{}-{}-{}: {e}", k.l, k.x, k.y, k.z));
-                let data = super::guarded(path, "the COPC decoder", || reader.read_entry(&node.entry).map_err(corrupt))?;
-                let layout = Layout { record_len: data.record_len(), ..self.layout };
-                layout.decode(data.raw_bytes(), node.first, out, table, keep_withheld);
-                return Ok(node.entry.point_count as usize);
+                let r = readers.len();
+                let decoded: Vec<Vec<Result<las::PointData>>> = readers
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(k, reader)| batch.iter().skip(k).step_by(r).map(|node| read_node(path, reader, node)).collect())
+                    .collect();
+                let mut decoded: Vec<std::vec::IntoIter<Result<las::PointData>>> = decoded.into_iter().map(Vec::into_iter).collect();
+                for (i, node) in batch.iter().enumerate() {
+                    let data = decoded[i % r].next().expect("a node's points")?;
+                    let layout = Layout { record_len: data.record_len(), ..self.layout };
+                    layout.decode(data.raw_bytes(), node.first, out, table, keep_withheld);
+                }
+                *next = end;
+                return Ok(records as usize);
             }
         }
         self.next += n as u64;
