@@ -288,5 +288,11 @@ fn a_curve_states_whether_its_crease_is_convex_or_concave() {
             }
         }
         assert!(checked >= 14 && vertical == 6, "noise {noise}: {checked} curves checked, {vertical} vertical, of {}", curves.len());
+        if noise == 0.0 {
+            // The library labels the curves it returns when told where the scanner stood.
+            let told = extract_cloud(&pts, &Params::default(), &RunOptions { outside: Some(scanner.clone()), ..Default::default() }).unwrap();
+            assert!(told.curves.iter().all(|c| c.shape == scanner.shape(c)));
+            assert!(told.curves.iter().any(|c| c.shape == Shape::Concave));
+        }
     }
 }

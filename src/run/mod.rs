@@ -540,7 +540,9 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
     let mut run = Run::new(ws, manifest, opts, None);
     // (A lone run does every tile itself: it has nothing to wait for.)
     let r = run.tile_passes(&Input::Points(points), params, &here)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
-    let (curves, counts, seconds) = run.curves(&r)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
+    let (mut curves, counts, seconds) = run.curves(&r)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
+    // (Points in memory give no scanner positions: only `outside` tells the shapes.)
+    opts.outside.clone().unwrap_or_default().label(&mut curves);
     Ok(Extraction { curves, params: r, tau: run.tau, counts, seconds })
 }
 
