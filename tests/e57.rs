@@ -152,3 +152,39 @@ fn an_e57_scan_pose_tells_convex_from_concave() {
     assert_eq!(shapes["convex"].as_u64().unwrap() + shapes["concave"].as_u64().unwrap() + shapes["unknown"].as_u64().unwrap(), curves.len() as u64);
     assert!(shapes["convex"].as_u64().unwrap() >= 12, "{shapes}");
 }
+
+/// Which scans place a scanner: a spherical scan always (at its pose's translation); a
+/// Cartesian scan stored about its scanner; not a Cartesian scan in a map's coordinates, whose
+/// origin lies far from its points, with an identity pose or none.
+#[test]
+fn scanner_positions_come_from_scans_stored_about_their_scanner() {
+    let d = tempfile::tempdir().unwrap();
+    let path = d.path().join("scans.e57");
+    let mut w = E57Writer::from_file(&path, "crease-test-file").unwrap();
+    let spherical = vec![Record::SPHERICAL_AZIMUTH_F32, Record::SPHERICAL_ELEVATION_F32, Record::SPHERICAL_RANGE_F32];
+    let mut scan = w.add_pointcloud("spherical", spherical).unwrap();
+    scan.set_transform(Some(Transform { rotation: Quaternion { w: 1.0, x: 0.0, y: 0.0, z: 0.0 }, translation: Translation { x: 10.0, y: 20.0, z: 1.5 } }));
+    for i in 0..10 {
+        scan.add_point(vec![RecordValue::Single(0.1 * i as f32), RecordValue::Single(-0.2), RecordValue::Single(5.0)]).unwrap();
+    }
+    scan.finalize().unwrap();
+    let cartesian = || vec![Record::CARTESIAN_X_F64, Record::CARTESIAN_Y_F64, Record::CARTESIAN_Z_F64];
+    let mut scan = w.add_pointcloud("about its scanner", cartesian()).unwrap();
+    scan.set_transform(Some(Transform { rotation: Quaternion { w: 1.0, x: 0.0, y: 0.0, z: 0.0 }, translation: Translation { x: -4.0, y: 0.0, z: 2.0 } }));
+    for i in 0..10 {
+        scan.add_point(vec![RecordValue::Double(3.0 + i as f64), RecordValue::Double(1.0), RecordValue::Double(-2.0)]).unwrap();
+    }
+    scan.finalize().unwrap();
+    // (With or without a pose: an identity pose is what some exports write.)
+    for pose in [None, Some(Transform { rotation: Quaternion { w: 1.0, x: 0.0, y: 0.0, z: 0.0 }, translation: Translation { x: 0.0, y: 0.0, z: 0.0 } })] {
+        let mut scan = w.add_pointcloud("map coordinates", cartesian()).unwrap();
+        scan.set_transform(pose);
+        for i in 0..10 {
+            scan.add_point(vec![RecordValue::Double(500_000.0 + i as f64), RecordValue::Double(5_400_000.0), RecordValue::Double(100.0)]).unwrap();
+        }
+        scan.finalize().unwrap();
+    }
+    w.finalize().unwrap();
+    let h = crease::io::read_header(&path).unwrap();
+    assert_eq!(h.scanners, vec![DVec3::new(10.0, 20.0, 1.5), DVec3::new(-4.0, 0.0, 2.0)]);
+}
