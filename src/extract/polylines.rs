@@ -236,8 +236,8 @@ impl Gathered {
 }
 
 /// The curve `c` with what was gathered along it, made into the output polyline `id` (world
-/// coordinates, from positions relative to `origin`): the normals' orientation is carried along
-/// the curve (turning both of a pair together), vertices without normals take their
+/// coordinates, from positions relative to `origin`): the normals take the orientation most
+/// of its vertices have (see [`Orientation`]), vertices without normals take their
 /// neighbours', and the evidence gives the confidence.
 pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
     // Each normal is aligned with the one before it along the curve, so that it turns smoothly

@@ -292,7 +292,8 @@ impl PointReader {
     }
 
     /// Replaces `out` with the next points: reads up to `max` records from the file (a COPC
-    /// file read with bounds: one octree node) and keeps those the filter accepts. Returns the
+    /// file read with bounds: whole octree nodes, at least one) and keeps those the filter
+    /// accepts. Returns the
     /// number of records read (0 at the end of the file); `out` may hold fewer points than that.
     pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk) -> Result<usize> {
         out.clear();
