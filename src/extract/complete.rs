@@ -671,6 +671,61 @@ mod tests {
         assert!(curves.iter().all(|c| c.v[0] == q && c.v.len() == 31));
     }
 
+    /// Short, jittered polylines scattered in a box of 100 by 100 by 1 steps of 0.1 (some
+    /// closed), and corners near some of their ends: many ends within the reach of others.
+    fn scattered_lines(seed: u64) -> (Vec<Curve>, Vec<DVec3>) {
+        let mut rng = crate::rng::Rng::new(seed);
+        let (mut curves, mut corners) = (vec![], vec![]);
+        for k in 0..80 {
+            let start = DVec3::new(rng.range(0.0, 10.0), rng.range(0.0, 10.0), rng.range(0.0, 0.1));
+            let a = rng.range(0.0, std::f64::consts::TAU);
+            let dir = DVec3::new(a.cos(), a.sin(), 0.0);
+            let n = 2 + (rng.next_u64() % 8) as usize;
+            let jitter = |rng: &mut crate::rng::Rng| DVec3::new(rng.range(-0.01, 0.01), rng.range(-0.01, 0.01), 0.0);
+            let v: Vec<DVec3> = (0..n).map(|i| start + dir * (0.1 * i as f64) + jitter(&mut rng)).collect();
+            if k % 7 == 0 {
+                corners.push(v[n - 1] + dir * 0.15);
+            }
+            curves.push(Curve::new(v, k % 31 == 30));
+        }
+        (curves, corners)
+    }
+
+    /// Curves as a sorted list of their exact vertices, corner flags and closure.
+    fn canonical(curves: &[Curve]) -> Vec<(Vec<[u64; 3]>, Vec<bool>, bool)> {
+        let mut out: Vec<_> = curves.iter().map(|c| (c.v.iter().map(|p| p.to_array().map(f64::to_bits)).collect(), c.corner.clone(), c.closed)).collect();
+        out.sort();
+        out
+    }
+
+    #[test]
+    fn groups_complete_as_the_whole_does() {
+        let p = CompleteParams { step: 0.1, reach: 4.0, aperture_deg: 45.0, min_steps: 3.0, smooth_passes: 2, corner_zone: 0.08 };
+        let reach = p.reach * p.step;
+        for seed in 1..=4 {
+            let (lines, corners) = scattered_lines(seed);
+            let whole = complete(lines.clone(), &corners, &p, &crate::cancel::Cancel::default());
+            let ends = lines.iter().enumerate().filter(|(_, c)| !c.closed).flat_map(|(i, c)| [(i as u32, c.v[0]), (i as u32, c.v[c.v.len() - 1])]);
+            let mut linker = super::super::groups::Linker::new(lines.len(), ends, reach);
+            for (i, c) in lines.iter().enumerate() {
+                linker.link(i as u32, &c.v);
+            }
+            let groups = linker.groups();
+            let near = super::super::groups::Corners::new(&corners, reach);
+            let mut parts = vec![];
+            for g in &groups {
+                let group: Vec<Curve> = g.iter().map(|&i| lines[i as usize].clone()).collect();
+                let corners = near.near(group.iter().filter(|c| !c.closed).flat_map(|c| [c.v[0], c.v[c.v.len() - 1]]));
+                parts.extend(complete(group, &corners, &p, &crate::cancel::Cancel::default()));
+            }
+            // (The lines must interact, and fall into several groups, for this to say anything.)
+            eprintln!("seed {seed}: {} groups, largest {}", groups.len(), groups.iter().map(Vec::len).max().unwrap_or(0));
+            assert!(groups.len() >= 5 && groups.iter().any(|g| g.len() >= 5), "seed {seed}: {} groups", groups.len());
+            assert_ne!(canonical(&whole), canonical(&lines), "seed {seed}: completion changed nothing");
+            assert_eq!(canonical(&parts), canonical(&whole), "seed {seed}");
+        }
+    }
+
     #[test]
     fn a_corner_the_lines_do_not_fix_stays_where_it_was() {
         // Two curves running straight through: parallel lines fix no point.

@@ -19,6 +19,7 @@ pub mod candidates;
 pub mod complete;
 pub mod consensus;
 pub mod fit;
+pub mod groups;
 pub mod grow;
 pub mod neighbourhood;
 pub mod params;

@@ -10,7 +10,6 @@ use super::grow;
 use super::params::Resolved;
 use super::project::{self, WorldCorner, WorldEdge};
 use super::smooth;
-use super::stitch::Line;
 use crate::curves::{Polyline, Vertex};
 use crate::keys::{bits_key, snap, snap_quantum};
 use crate::spatial::Index;
@@ -123,18 +122,16 @@ pub fn grow_block(core: &[DVec3], halo: &[DVec3], blocks: &Blocks, b: u32, r: &R
     grown.iter().flat_map(|g| blocks::cut(&g.vertices, g.closed, block, |p| blocks.find(p, halo) == Some(b))).collect()
 }
 
-/// Stage 5 on the stitched polylines (relative to the origin of the corners `grouped`).
-/// Once `cancel` is set, what comes back is partial.
-pub fn complete_lines(lines: Vec<Line>, grouped: &[DVec3], r: &Resolved, cancel: &crate::cancel::Cancel) -> Vec<complete::Curve> {
-    let cp = complete::CompleteParams {
+/// Completion's parameters (stage 5) for the resolved parameters `r`.
+pub fn complete_params(r: &Resolved) -> complete::CompleteParams {
+    complete::CompleteParams {
         step: r.step,
         reach: r.reach_steps,
         aperture_deg: r.aperture_deg,
         min_steps: 3.0,
         smooth_passes: 2,
         corner_zone: r.corner_radius,
-    };
-    complete::complete(lines.into_iter().map(|(v, closed)| complete::Curve::new(v, closed)).collect(), grouped, &cp, cancel)
+    }
 }
 
 /// The smoothed edge points near a curve, indexed: what a curve's vertex normals and evidence

@@ -7,8 +7,10 @@ use super::{Run, Worker};
 use crate::curves::Polyline;
 use crate::error::{Error, Result};
 use crate::extract::blocks::{self, in_box, Blocks, Census, Layers, Piece};
+use crate::extract::complete::{self, Curve};
 use crate::extract::polylines::{self, Gathered, NearEdges, SmoothedEdges};
-use crate::extract::{complete, stitch, Counts, Resolved, Timings, WorldEdge};
+use crate::extract::stitch::{self, Line};
+use crate::extract::{groups, Counts, Resolved, Timings, WorldEdge};
 use crate::keys::snap_quantum;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -45,8 +47,9 @@ impl Run<'_> {
     ///    the block's core, cut at its border; each block's pieces are kept in the working data
     ///    (a worker grows its share of the blocks);
     /// 3. the stitcher joins the pieces across the borders;
-    /// 4. completion (stage 5) on the stitched polylines;
-    /// 5. per block again: the curves' normals and evidence from the smoothed edge points.
+    /// 4. completion (stage 5) on the stitched polylines, a group of them at a time;
+    /// 5. per block again: the curves' normals and evidence from the smoothed edge points, a
+    ///    batch of groups at a time.
     ///
     /// None if this process is a worker whose share is done but whose run is not (see
     /// [`Run::waiting`]).
@@ -79,9 +82,7 @@ impl Run<'_> {
             self.opts.debug.points("corners.obj", &grouped, origin);
         }
         let tc = Instant::now();
-        let curves = polylines::complete_lines(lines, &grouped, r, &self.opts.cancel);
-        self.opts.cancel.check()?;
-        let traced = self.attribute(curves, &blocks, origin, r)?;
+        let traced = self.complete(lines, &grouped, &blocks, origin, r)?;
         seconds.completion = tc.elapsed().as_secs_f64();
         let all = traced.len();
         let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
@@ -349,11 +350,52 @@ impl Run<'_> {
         Ok(())
     }
 
+    /// Stage 5 on the stitched `lines`, a group at a time (see [`groups`]), and then each
+    /// batch of groups' curves attributed (see [`Run::attribute`]): only a batch of curves is
+    /// held before it is attributed. The curves come in the order of their groups' first lines.
+    fn complete(&self, mut lines: Vec<Line>, grouped: &[DVec3], blocks: &Blocks, origin: DVec3, r: &Resolved) -> Result<Vec<Polyline>> {
+        let cp = polylines::complete_params(r);
+        let reach = cp.reach * cp.step;
+        let ends = lines.iter().enumerate().filter(|(_, l)| !l.1).flat_map(|(i, (v, _))| [(i as u32, v[0]), (i as u32, v[v.len() - 1])]);
+        let mut linker = groups::Linker::new(lines.len(), ends, reach);
+        for (i, (v, _)) in lines.iter().enumerate() {
+            linker.link(i as u32, v);
+        }
+        let corners = groups::Corners::new(grouped, reach);
+        // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
+        let budget = (self.opts.memory / 16 / 140).max(1 << 14) as usize;
+        let mut traced = vec![];
+        let mut batch: Vec<Vec<Curve>> = vec![];
+        let mut held = 0;
+        let all = linker.groups();
+        for (k, g) in all.iter().enumerate() {
+            let group: Vec<Curve> = g.iter().map(|&i| std::mem::take(&mut lines[i as usize])).map(|(v, closed)| Curve::new(v, closed)).collect();
+            held += group.iter().map(|c| c.v.len()).sum::<usize>();
+            batch.push(group);
+            if held < budget && k + 1 < all.len() {
+                continue;
+            }
+            let curves: Vec<Curve> = std::mem::take(&mut batch)
+                .into_par_iter()
+                .map(|group| {
+                    let near = corners.near(group.iter().filter(|c| !c.closed).flat_map(|c| [c.v[0], c.v[c.v.len() - 1]]));
+                    complete::complete(group, &near, &cp, &self.opts.cancel)
+                })
+                .flatten()
+                .collect();
+            self.opts.cancel.check()?;
+            let first = traced.len() as u32;
+            traced.extend(self.attribute(curves, blocks, origin, r, first)?);
+            held = 0;
+        }
+        Ok(traced)
+    }
+
     /// Each curve's vertex normals and evidence, from the smoothed edge points a block at a
     /// time: each vertex and each place along a curve is looked up in the block that holds it
     /// (or, off every block, the one it is within a step of), with the smoothed edge points
     /// within a step and a half of that block.
-    fn attribute(&self, curves: Vec<complete::Curve>, blocks: &Blocks, origin: DVec3, r: &Resolved) -> Result<Vec<Polyline>> {
+    fn attribute(&self, curves: Vec<Curve>, blocks: &Blocks, origin: DVec3, r: &Resolved, first: u32) -> Result<Vec<Polyline>> {
         let step = r.step;
         // The curves each block may hold a vertex or place of.
         let mut meets: Vec<Vec<u32>> = vec![vec![]; blocks.list.len()];
@@ -405,7 +447,7 @@ impl Run<'_> {
             }
             self.opts.cancel.check()?;
         }
-        Ok(curves.into_iter().zip(gathered).enumerate().map(|(id, (c, g))| polylines::finish(id as u32, c, g, origin, step)).collect())
+        Ok(curves.into_iter().zip(gathered).enumerate().map(|(id, (c, g))| polylines::finish(first + id as u32, c, g, origin, step)).collect())
     }
 }
 

@@ -1,0 +1,140 @@
+//! Groups of stitched lines that completion (stage 5) can complete apart, so that the curve
+//! stage holds one group at a time rather than every line of the cloud.
+//!
+//! Completion acts only at free ends, and an end looks no farther than the reach. An end never
+//! moves: it is joined, attached to a corner, or left. What an end finds is a vertex within the
+//! reach of it: one the line had, or one completion added, which is a corner that some other
+//! end within the reach of it was attached to. So whatever an end of line A acts on lies within
+//! twice the reach of an end of A or of a line A's ends interact with, and a corner of the
+//! projection stage is claimed only by ends within the reach of it, so within twice the reach
+//! of each other. Lines are linked where a vertex of one lies within twice the reach of an end
+//! of the other; the groups are the linked sets. Completion of a group alone, with the corners
+//! within the reach of its ends, then gives exactly the curves completion of all lines gives
+//! for it: the actions of separate groups never touch the same curve or corner, and within a
+//! group they come in the same order (lines keep their relative order; see
+//! `groups_complete_as_the_whole_does` in [`super::complete`]).
+
+use crate::grid::HashGrid;
+use glam::DVec3;
+
+/// Links lines into groups: first every open line's ends, then every line's vertices.
+pub struct Linker {
+    radius: f64,
+    ends: HashGrid<(u32, DVec3)>,
+    /// Union-find forest over the lines; a root is its set's smallest line.
+    parent: Vec<u32>,
+}
+
+impl Linker {
+    /// A linker for `count` lines, of which those in `ends` (line, end position) are open,
+    /// for completion that looks `reach` ahead.
+    pub fn new(count: usize, ends: impl IntoIterator<Item = (u32, DVec3)>, reach: f64) -> Linker {
+        // (The margin covers the rounding of distances summed along two reaches.)
+        let radius = 2.0 * reach * (1.0 + 1e-9);
+        let mut grid = HashGrid::new(radius);
+        for (line, p) in ends {
+            grid.insert(p, (line, p));
+        }
+        Linker { radius, ends: grid, parent: (0..count as u32).collect() }
+    }
+
+    /// Links `line`, with vertices `v`, to every line with an end within twice the reach of
+    /// one of them.
+    pub fn link(&mut self, line: u32, v: &[DVec3]) {
+        for &p in v {
+            let mut near = vec![];
+            self.ends.near(p, self.radius, |(other, q)| {
+                if q.distance(p) <= self.radius {
+                    near.push(other);
+                }
+            });
+            for other in near {
+                self.union(line, other);
+            }
+        }
+    }
+
+    fn root(&mut self, mut a: u32) -> u32 {
+        while self.parent[a as usize] != a {
+            let up = self.parent[self.parent[a as usize] as usize];
+            self.parent[a as usize] = up;
+            a = up;
+        }
+        a
+    }
+
+    fn union(&mut self, a: u32, b: u32) {
+        let (a, b) = (self.root(a), self.root(b));
+        let (low, high) = (a.min(b), a.max(b));
+        self.parent[high as usize] = low;
+    }
+
+    /// The groups, each its lines in order, in the order of their first lines.
+    pub fn groups(mut self) -> Vec<Vec<u32>> {
+        let n = self.parent.len();
+        let mut at: Vec<u32> = vec![u32::MAX; n];
+        let mut out: Vec<Vec<u32>> = vec![];
+        for line in 0..n as u32 {
+            let r = self.root(line) as usize;
+            if at[r] == u32::MAX {
+                at[r] = out.len() as u32;
+                out.push(vec![]);
+            }
+            out[at[r] as usize].push(line);
+        }
+        out
+    }
+}
+
+/// The corners of the projection stage, indexed, for handing each group those within the
+/// reach of its ends.
+pub struct Corners<'a> {
+    all: &'a [DVec3],
+    grid: HashGrid<u32>,
+    reach: f64,
+}
+
+impl<'a> Corners<'a> {
+    /// Indexes `all`, to be handed out within `reach` of ends.
+    pub fn new(all: &'a [DVec3], reach: f64) -> Corners<'a> {
+        let mut grid = HashGrid::new(reach.max(f64::MIN_POSITIVE));
+        for (k, &q) in all.iter().enumerate() {
+            grid.insert(q, k as u32);
+        }
+        Corners { all, grid, reach: reach * (1.0 + 1e-9) }
+    }
+
+    /// The corners within the reach of any of `ends`, in their order.
+    pub fn near(&self, ends: impl IntoIterator<Item = DVec3>) -> Vec<DVec3> {
+        let mut found = vec![];
+        for x in ends {
+            self.grid.near(x, self.reach, |k| {
+                if self.all[k as usize].distance(x) <= self.reach {
+                    found.push(k);
+                }
+            });
+        }
+        found.sort_unstable();
+        found.dedup();
+        found.into_iter().map(|k| self.all[k as usize]).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lines_link_through_ends_within_twice_the_reach() {
+        let x = |x: f64| DVec3::new(x, 0.0, 0.0);
+        // Line 0 ends at 0 and 1; line 1 passes 1.9 from line 0's end (linked at reach 1);
+        // line 2 lies 2.5 from every end; line 3 is closed, its vertex 0.5 from line 2's end.
+        let lines = [vec![x(0.0), x(1.0)], vec![x(2.9), x(3.0)], vec![x(6.0), x(7.0)], vec![x(7.5), x(8.0), x(7.7)]];
+        let ends = [(0, x(0.0)), (0, x(1.0)), (1, x(2.9)), (1, x(3.0)), (2, x(6.0)), (2, x(7.0))];
+        let mut l = Linker::new(lines.len(), ends, 1.0);
+        for (i, v) in lines.iter().enumerate() {
+            l.link(i as u32, v);
+        }
+        assert_eq!(l.groups(), vec![vec![0, 1], vec![2, 3]]);
+    }
+}
