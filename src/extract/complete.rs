@@ -708,7 +708,8 @@ mod tests {
             let ends = lines.iter().enumerate().filter(|(_, c)| !c.closed).flat_map(|(i, c)| [(i as u32, c.v[0]), (i as u32, c.v[c.v.len() - 1])]);
             let mut linker = super::super::groups::Linker::new(lines.len(), ends, reach);
             for (i, c) in lines.iter().enumerate() {
-                linker.link(i as u32, &c.v);
+                let near = linker.near(&c.v);
+                linker.link(i as u32, &near);
             }
             let groups = linker.groups();
             let near = super::super::groups::Corners::new(&corners, reach);

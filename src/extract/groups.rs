@@ -38,19 +38,25 @@ impl Linker {
         Linker { radius, ends: grid, parent: (0..count as u32).collect() }
     }
 
-    /// Links `line`, with vertices `v`, to every line with an end within twice the reach of
-    /// one of them.
-    pub fn link(&mut self, line: u32, v: &[DVec3]) {
+    /// The lines with an end within twice the reach of one of the vertices `v`.
+    pub fn near(&self, v: &[DVec3]) -> Vec<u32> {
+        let mut near = vec![];
         for &p in v {
-            let mut near = vec![];
             self.ends.near(p, self.radius, |(other, q)| {
                 if q.distance(p) <= self.radius {
                     near.push(other);
                 }
             });
-            for other in near {
-                self.union(line, other);
-            }
+        }
+        near.sort_unstable();
+        near.dedup();
+        near
+    }
+
+    /// Links `line` to `others` (see [`Linker::near`]).
+    pub fn link(&mut self, line: u32, others: &[u32]) {
+        for &other in others {
+            self.union(line, other);
         }
     }
 
@@ -133,7 +139,8 @@ mod tests {
         let ends = [(0, x(0.0)), (0, x(1.0)), (1, x(2.9)), (1, x(3.0)), (2, x(6.0)), (2, x(7.0))];
         let mut l = Linker::new(lines.len(), ends, 1.0);
         for (i, v) in lines.iter().enumerate() {
-            l.link(i as u32, v);
+            let near = l.near(v);
+            l.link(i as u32, &near);
         }
         assert_eq!(l.groups(), vec![vec![0, 1], vec![2, 3]]);
     }

@@ -6,10 +6,10 @@ use super::records::{self, Pieces, Record, Smoothed};
 use super::{Run, Worker};
 use crate::curves::Polyline;
 use crate::error::{Error, Result};
-use crate::extract::blocks::{self, in_box, Blocks, Census, Layers, Piece};
+use crate::extract::blocks::{self, in_box, Blocks, Census, Layers};
 use crate::extract::complete::{self, Curve};
 use crate::extract::polylines::{self, Gathered, NearEdges, SmoothedEdges};
-use crate::extract::stitch::{self, Line};
+use crate::extract::stitch::{self, PieceEnds, Plan};
 use crate::extract::{groups, Counts, Resolved, Timings, WorldEdge};
 use crate::keys::snap_quantum;
 use glam::DVec3;
@@ -20,9 +20,15 @@ use std::time::Instant;
 /// the origin).
 type TileBox = (u32, DVec3, DVec3);
 
-/// Every block's pieces, each with its block's number, and the edge points the consensus
-/// filter dropped in all.
-type Grown = (Vec<(u32, Piece)>, u64);
+/// What the stitcher is given of every block's pieces.
+struct Grown {
+    /// The ends of every piece, numbered in block order.
+    ends: Vec<PieceEnds>,
+    /// Each block's first piece's number.
+    first: Vec<u32>,
+    /// The edge points the consensus filter dropped in all.
+    unconfirmed: u64,
+}
 
 /// What the survey of the edge points found (see [`Run::survey`]).
 pub(super) struct Survey {
@@ -64,7 +70,7 @@ impl Run<'_> {
             self.waiting = Some("the curves and outputs (worker 0 writes them)".into());
             return Ok(None);
         }
-        let Some((pieces, unconfirmed)) = self.all_pieces(&survey)? else { return Ok(None) };
+        let Some(Grown { ends, first, unconfirmed }) = self.all_pieces(&survey)? else { return Ok(None) };
         let Survey { counts, blocks, grouped, origin, .. } = survey;
         let mut counts = Counts {
             points: self.manifest.tile_points.iter().sum(),
@@ -74,15 +80,18 @@ impl Run<'_> {
             unconfirmed,
             ..counts
         };
-        let lines = stitch::stitch(pieces, stitch::JOIN_STEPS * r.step, stitch::MERGE_STEPS * r.step);
-        counts.grown = lines.len() as u64;
+        let merge = stitch::MERGE_STEPS * r.step;
+        let plans = stitch::plan(&ends, stitch::JOIN_STEPS * r.step, merge);
+        counts.grown = plans.len() as u64;
+        let mut store = PieceStore { run: self, ends: &ends, first: &first, merge, recent: Recent::new(self.opts.memory / 16 / 48) };
         if self.opts.debug.on() {
-            let pl: Vec<Polyline> = lines.iter().enumerate().map(|(i, l)| Polyline::from_points(i as u32, l.0.iter().map(|p| *p + origin))).collect();
+            let lines = store.lines(&plans.iter().collect::<Vec<_>>())?;
+            let pl: Vec<Polyline> = lines.iter().enumerate().map(|(i, l)| Polyline::from_points(i as u32, l.iter().map(|p| *p + origin))).collect();
             self.opts.debug.polylines("grown.obj", &pl);
             self.opts.debug.points("corners.obj", &grouped, origin);
         }
         let tc = Instant::now();
-        let traced = self.complete(lines, &grouped, &blocks, origin, r)?;
+        let traced = self.complete(&mut store, &plans, &grouped, &blocks, origin, r)?;
         seconds.completion = tc.elapsed().as_secs_f64();
         let all = traced.len();
         let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
@@ -222,9 +231,9 @@ impl Run<'_> {
         Ok(todo)
     }
 
-    /// Every block's pieces, in block order, and the edge points the consensus filter dropped
-    /// in all; None (noting what it waits for) while some block is not grown yet (another
-    /// worker's share).
+    /// The ends of every block's pieces, in block order, and the edge points the consensus
+    /// filter dropped in all; None (noting what it waits for) while some block is not grown yet
+    /// (another worker's share). The pieces' vertices stay in their records until gathered.
     fn all_pieces(&mut self, survey: &Survey) -> Result<Option<Grown>> {
         let n = survey.blocks.list.len() as u32;
         let done = (0..n).filter(|&b| self.ws.exists(&records::name(Pieces::DIR, b))).count();
@@ -232,17 +241,24 @@ impl Run<'_> {
             self.waiting = Some(format!("curves: {done} of {n} blocks grown (the other workers' share)"));
             return Ok(None);
         }
-        let kept = (0..n).into_par_iter().map(|b| records::read::<Pieces>(&self.ws, b)).collect::<Result<Vec<_>>>()?;
-        let (mut pieces, mut unconfirmed) = (vec![], 0);
-        for (b, k) in (0..n).zip(kept) {
-            if !k.grown_for(&survey.blocks.list[b as usize], survey.origin) {
-                let why = "grown for other blocks than this run's (by a worker given another --block-steps?)";
-                return Err(Error::damaged(self.ws.path(&records::name(Pieces::DIR, b)), why));
-            }
-            unconfirmed += k.unconfirmed;
-            pieces.extend(k.pieces.into_iter().map(|p| (b, p)));
+        let kept = (0..n)
+            .into_par_iter()
+            .map(|b| {
+                let k = records::read::<Pieces>(&self.ws, b)?;
+                if !k.grown_for(&survey.blocks.list[b as usize], survey.origin) {
+                    let why = "grown for other blocks than this run's (by a worker given another --block-steps?)";
+                    return Err(Error::damaged(self.ws.path(&records::name(Pieces::DIR, b)), why));
+                }
+                Ok((k.unconfirmed, k.pieces.iter().map(|p| PieceEnds::of(b, p)).collect::<Vec<_>>()))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let mut grown = Grown { ends: vec![], first: vec![], unconfirmed: 0 };
+        for (unconfirmed, ends) in kept {
+            grown.first.push(grown.ends.len() as u32);
+            grown.unconfirmed += unconfirmed;
+            grown.ends.extend(ends);
         }
-        Ok(Some((pieces, unconfirmed)))
+        Ok(Some(grown))
     }
 
     /// Stages 3 and 4 for this process's share of the blocks, those not done yet, a block at a
@@ -350,32 +366,57 @@ impl Run<'_> {
         Ok(())
     }
 
-    /// Stage 5 on the stitched `lines`, a group at a time (see [`groups`]), and then each
-    /// batch of groups' curves attributed (see [`Run::attribute`]): only a batch of curves is
-    /// held before it is attributed. The curves come in the order of their groups' first lines.
-    fn complete(&self, mut lines: Vec<Line>, grouped: &[DVec3], blocks: &Blocks, origin: DVec3, r: &Resolved) -> Result<Vec<Polyline>> {
+    /// Stage 5 on the stitched polylines `plans`, a group at a time (see [`groups`]), each
+    /// batch of groups' curves then attributed (see [`Run::attribute`]): a batch's polylines
+    /// are gathered from the pieces, completed and attributed, and only then the next. The
+    /// curves come in the order of their groups' first polylines.
+    fn complete(&self, store: &mut PieceStore, plans: &[Plan], grouped: &[DVec3], blocks: &Blocks, origin: DVec3, r: &Resolved) -> Result<Vec<Polyline>> {
         let cp = polylines::complete_params(r);
         let reach = cp.reach * cp.step;
-        let ends = lines.iter().enumerate().filter(|(_, l)| !l.1).flat_map(|(i, (v, _))| [(i as u32, v[0]), (i as u32, v[v.len() - 1])]);
-        let mut linker = groups::Linker::new(lines.len(), ends, reach);
-        for (i, (v, _)) in lines.iter().enumerate() {
-            linker.link(i as u32, v);
-        }
-        let corners = groups::Corners::new(grouped, reach);
         // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
         let budget = (self.opts.memory / 16 / 140).max(1 << 14) as usize;
-        let mut traced = vec![];
-        let mut batch: Vec<Vec<Curve>> = vec![];
-        let mut held = 0;
-        let all = linker.groups();
-        for (k, g) in all.iter().enumerate() {
-            let group: Vec<Curve> = g.iter().map(|&i| std::mem::take(&mut lines[i as usize])).map(|(v, closed)| Curve::new(v, closed)).collect();
-            held += group.iter().map(|c| c.v.len()).sum::<usize>();
-            batch.push(group);
-            if held < budget && k + 1 < all.len() {
-                continue;
+        let size = |p: &Plan| p.parts.iter().map(|&(k, _)| store.ends[k as usize].len as usize).sum::<usize>();
+        let batches = |items: &mut dyn Iterator<Item = (usize, usize)>| {
+            let mut out: Vec<Vec<usize>> = vec![vec![]];
+            let mut held = 0;
+            for (i, n) in items {
+                if held >= budget {
+                    out.push(vec![]);
+                    held = 0;
+                }
+                out.last_mut().unwrap().push(i);
+                held += n;
             }
-            let curves: Vec<Curve> = std::mem::take(&mut batch)
+            out
+        };
+        // The groups: each open polyline's ends, then every polyline's vertices, in batches.
+        let mut ends = vec![];
+        for (i, p) in plans.iter().enumerate().filter(|(_, p)| !p.closed) {
+            let [a, b] = match p.ends {
+                Some(e) => e,
+                None => {
+                    let v = store.lines(&[p])?.remove(0);
+                    [v[0], v[v.len() - 1]]
+                }
+            };
+            ends.extend([(i as u32, a), (i as u32, b)]);
+        }
+        let mut linker = groups::Linker::new(plans.len(), ends, reach);
+        for batch in batches(&mut plans.iter().map(size).enumerate()) {
+            let lines = store.lines(&batch.iter().map(|&i| &plans[i]).collect::<Vec<_>>())?;
+            let near: Vec<Vec<u32>> = lines.par_iter().map(|v| linker.near(v)).collect();
+            for (&i, others) in batch.iter().zip(near) {
+                linker.link(i as u32, &others);
+            }
+        }
+        let all = linker.groups();
+        let corners = groups::Corners::new(grouped, reach);
+        let mut traced = vec![];
+        for batch in batches(&mut all.iter().map(|g| g.iter().map(|&i| size(&plans[i as usize])).sum()).enumerate()) {
+            let wanted: Vec<&Plan> = batch.iter().flat_map(|&g| all[g].iter().map(|&i| &plans[i as usize])).collect();
+            let mut lines = store.lines(&wanted)?.into_iter().zip(wanted).map(|(v, p)| Curve::new(v, p.closed));
+            let groups: Vec<Vec<Curve>> = batch.iter().map(|&g| lines.by_ref().take(all[g].len()).collect()).collect();
+            let curves: Vec<Curve> = groups
                 .into_par_iter()
                 .map(|group| {
                     let near = corners.near(group.iter().filter(|c| !c.closed).flat_map(|c| [c.v[0], c.v[c.v.len() - 1]]));
@@ -386,7 +427,6 @@ impl Run<'_> {
             self.opts.cancel.check()?;
             let first = traced.len() as u32;
             traced.extend(self.attribute(curves, blocks, origin, r, first)?);
-            held = 0;
         }
         Ok(traced)
     }
@@ -451,6 +491,32 @@ impl Run<'_> {
     }
 }
 
+/// The pieces' vertices, read from their blocks' records as the polylines are gathered.
+struct PieceStore<'a> {
+    run: &'a Run<'a>,
+    ends: &'a [PieceEnds],
+    first: &'a [u32],
+    merge: f64,
+    recent: Recent<Pieces>,
+}
+
+impl PieceStore<'_> {
+    /// The vertices of the polylines `plans`, in order.
+    fn lines(&mut self, plans: &[&Plan]) -> Result<Vec<Vec<DVec3>>> {
+        let mut wanted: Vec<u32> = plans.iter().flat_map(|p| p.parts.iter().map(|&(k, _)| self.ends[k as usize].block)).collect();
+        wanted.sort_unstable();
+        wanted.dedup();
+        let ws = &self.run.ws;
+        let held = self.recent.get(&wanted, |b| records::read::<Pieces>(ws, b))?;
+        let piece = |k: u32| {
+            let b = self.ends[k as usize].block;
+            let record = &held[wanted.binary_search(&b).unwrap_or_default()];
+            &record.pieces[(k - self.first[b as usize]) as usize].v[..]
+        };
+        Ok(plans.iter().map(|p| stitch::gather(p, piece, self.merge)).collect())
+    }
+}
+
 /// The last few records read (tiles' edge points, blocks' smoothed edge points), up to a number
 /// of points in all, so that neighbouring blocks do not decode the same records again.
 struct Recent<T> {
@@ -467,6 +533,12 @@ trait Points {
 impl Points for Vec<WorldEdge> {
     fn points(&self) -> u64 {
         self.len() as u64
+    }
+}
+
+impl Points for Pieces {
+    fn points(&self) -> u64 {
+        self.pieces.iter().map(|p| p.v.len() as u64).sum()
     }
 }
 
