@@ -2,7 +2,7 @@
 //! by side, points subsampled and shaded by the slope of their depth, and the curves drawn
 //! over them in a colour per curve.
 
-use crate::curves::Polyline;
+use crate::curves::Curves;
 use crate::error::{Error, Result};
 use glam::{DMat3, DVec3};
 use std::path::Path;
@@ -43,23 +43,24 @@ impl Image {
 ///
 /// let points: Vec<DVec3> = (0..10_000).map(|i| DVec3::new((i % 100) as f64, (i / 100) as f64, 0.0)).collect();
 /// let curves = [Polyline::from_points(0, [DVec3::ZERO, DVec3::new(99.0, 0.0, 0.0)])];
-/// let image = crease::preview::render(&points, &curves);
+/// let image = crease::preview::render(&points, &curves[..])?;
 /// assert_eq!((image.width, image.height), (2 * crease::preview::SIDE, crease::preview::SIDE));
+/// # Ok::<(), crease::Error>(())
 /// ```
-pub fn render(points: &[DVec3], curves: &[Polyline]) -> Image {
+pub fn render(points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<Image> {
     let mut image = Image::new(2 * SIDE, SIDE);
     // Top: looking down. Oblique: turned 30 degrees about the vertical, tilted to look down at
     // 35 degrees.
     let oblique = DMat3::from_rotation_x(-55f64.to_radians()) * DMat3::from_rotation_z(-30f64.to_radians());
     for (k, view) in [DMat3::IDENTITY, oblique].into_iter().enumerate() {
-        draw_view(&mut image, k * SIDE, view, points, curves);
+        draw_view(&mut image, k * SIDE, view, points, curves)?;
     }
-    image
+    Ok(image)
 }
 
 /// Writes the preview of `points` and `curves` to `path` as PNG.
-pub fn write_png(path: &Path, points: &[DVec3], curves: &[Polyline]) -> Result<()> {
-    let image = render(points, curves);
+pub fn write_png(path: &Path, points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<()> {
+    let image = render(points, curves)?;
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(f), image.width as u32, image.height as u32);
     enc.set_color(png::ColorType::Rgb);
@@ -74,7 +75,7 @@ pub fn write_png(path: &Path, points: &[DVec3], curves: &[Polyline]) -> Result<(
 
 /// Draws one view into the square of `image` starting at column `x0`: `view` turns world
 /// directions into view directions (x right, y up, z towards the viewer).
-fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves: &[Polyline]) {
+fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<()> {
     let centre = points.iter().fold(DVec3::ZERO, |s, &p| s + p) / points.len().max(1) as f64;
     let to_view = |p: DVec3| view * (p - centre);
     let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
@@ -83,7 +84,7 @@ fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves
         (lo, hi) = (lo.min(v), hi.max(v));
     }
     if points.is_empty() || !(hi.x >= lo.x && hi.y >= lo.y) {
-        return;
+        return Ok(());
     }
     let margin = 0.04 * SIDE as f64;
     let span = (hi.x - lo.x).max(hi.y - lo.y).max(f64::MIN_POSITIVE);
@@ -123,7 +124,7 @@ fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves
             image.set((x0 + x) as i64, y as i64, [g, g, g]);
         }
     }
-    for c in curves {
+    curves.each(&mut |c| {
         let colour = curve_colour(c.id);
         let n = c.vertices.len();
         for s in 0..c.segment_count() {
@@ -140,7 +141,8 @@ fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves
                 }
             }
         }
-    }
+        Ok(())
+    })
 }
 
 /// A saturated colour for curve `id`: hues a golden angle apart, so neighbours differ.
@@ -168,8 +170,8 @@ mod tests {
     #[test]
     fn points_are_shaded_and_curves_coloured() {
         let points: Vec<DVec3> = (0..40_000).map(|i| DVec3::new((i % 200) as f64 * 0.005, (i / 200) as f64 * 0.005, 0.0)).collect();
-        let curve = Polyline::from_points(3, [DVec3::ZERO, DVec3::new(0.995, 0.0, 0.0)]);
-        let image = render(&points, &[curve]);
+        let curve = crate::curves::Polyline::from_points(3, [DVec3::ZERO, DVec3::new(0.995, 0.0, 0.0)]);
+        let image = render(&points, &[curve][..]).unwrap();
         let at = |x: usize, y: usize| &image.rgb[3 * (y * image.width + x)..3 * (y * image.width + x) + 3];
         // The square fills the top view but its margin; its middle is lit grey, not white.
         let middle = at(SIDE / 2, SIDE / 2);

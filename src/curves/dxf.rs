@@ -6,7 +6,7 @@
 //! each a name (code 1000) followed by its value (1071 for the id, 1070 for `closed`, 1040 for
 //! lengths, angles and the confidence, 1000 for text); an angle that is not known is left out.
 
-use super::Polyline;
+use super::{Curves, Polyline};
 use crate::crs::Crs;
 use crate::error::{Error, Result};
 use dxf::entities::{Entity, EntityType, ModelPoint, Polyline as DxfPolyline, Vertex as DxfVertex};
@@ -33,7 +33,7 @@ fn attributes(c: &Polyline) -> XData {
 }
 
 /// Writes `curves` to `path` as DXF (AutoCAD 2000 format, which CAD tools and GDAL read).
-pub fn write_dxf(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
+pub fn write_dxf(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Result<()> {
     let mut d = Drawing::new();
     d.header.version = dxf::enums::AcadVersion::R2000;
     // (DXF has no CRS: its summary goes in the drawing's project name.)
@@ -43,7 +43,8 @@ pub fn write_dxf(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
     }
     d.add_app_id(AppId { name: APP.into(), ..Default::default() });
     let mut corners = std::collections::BTreeSet::new();
-    for c in curves {
+    // (The drawing is built whole, then saved: the dxf crate writes a drawing, not a stream.)
+    curves.each(&mut |c| {
         let mut pl = DxfPolyline::default();
         pl.set_is_3d_polyline(true);
         pl.set_is_closed(c.closed);
@@ -59,7 +60,8 @@ pub fn write_dxf(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
         e.common.layer = CURVES.into();
         e.common.x_data.push(attributes(c));
         d.add_entity(e);
-    }
+        Ok(())
+    })?;
     for p in corners {
         let [x, y, z] = p.map(f64::from_bits);
         let mut e = Entity::new(EntityType::ModelPoint(ModelPoint::new(Point::new(x, y, z))));

@@ -5,7 +5,7 @@
 //! (GDAL reads the `crs` member only: its name is the EPSG URN, or the WKT when there is no
 //! code).
 
-use super::Polyline;
+use super::Curves;
 use crate::error::{Error, Result};
 use crate::points::Crs;
 use serde_json::{json, Value};
@@ -13,7 +13,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 /// Writes `curves` to `path` as a GeoJSON FeatureCollection.
-pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
+pub fn write_geojson(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);
     let mut head = serde_json::Map::new();
@@ -41,7 +41,8 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
     // (The head always has its type: it ends `"...}`, and the features go before the `}`.)
     w.write_all(&head.as_bytes()[..head.len() - 1]).map_err(io)?;
     w.write_all(b",\"features\":[").map_err(io)?;
-    for (k, c) in curves.iter().enumerate() {
+    let mut k = 0;
+    curves.each(&mut |c| {
         let mut coords: Vec<[f64; 3]> = c.vertices.iter().map(|v| v.p.to_array()).collect();
         if c.closed && !coords.is_empty() {
             coords.push(coords[0]);
@@ -59,7 +60,8 @@ pub fn write_geojson(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> 
         if k > 0 {
             w.write_all(b",").map_err(io)?;
         }
-        serde_json::to_writer(&mut w, &feature).map_err(|e| io(std::io::Error::from(e)))?;
-    }
+        k += 1;
+        serde_json::to_writer(&mut w, &feature).map_err(|e| io(std::io::Error::from(e)))
+    })?;
     w.write_all(b"]}").and_then(|_| w.flush()).map_err(io)
 }

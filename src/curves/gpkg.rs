@@ -2,7 +2,7 @@
 //! with the per-curve attributes as columns, and the CRS in the spatial reference table, so
 //! GIS tools place the curves without a sidecar. Written with SQLite (rusqlite, bundled).
 
-use super::Polyline;
+use super::{Curves, Polyline};
 use crate::crs::Crs;
 use crate::error::{Error, Result};
 use rusqlite::{params, Connection};
@@ -47,7 +47,7 @@ fn geometry(c: &Polyline, srs: i64) -> Vec<u8> {
 }
 
 /// Writes `curves` to `path` as a GeoPackage (replacing any file there).
-pub fn write_gpkg(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
+pub fn write_gpkg(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Result<()> {
     let _ = std::fs::remove_file(path);
     let out = |e: rusqlite::Error| Error::output(path, std::io::Error::other(e.to_string()));
     let mut db = Connection::open(path).map_err(out)?;
@@ -79,7 +79,10 @@ pub fn write_gpkg(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
         tx.execute("INSERT INTO gpkg_spatial_ref_sys VALUES (?1, ?2, ?3, ?4, ?5, ?6)", params![name, srs, org, code, definition, crs.units()]).map_err(out)?;
     }
     let mut b = crate::points::Bounds::EMPTY;
-    curves.iter().flat_map(|c| &c.vertices).for_each(|v| b.grow(v.p));
+    curves.each(&mut |c| {
+        c.vertices.iter().for_each(|v| b.grow(v.p));
+        Ok(())
+    })?;
     let (lo, hi) = if b.is_empty() { ([0.0; 3], [0.0; 3]) } else { (b.min, b.max) };
     tx.execute(
         "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, max_x, max_y, srs_id) VALUES ('curves', 'features', 'curves', 'crease feature curves', ?1, ?2, ?3, ?4, ?5)",
@@ -91,7 +94,7 @@ pub fn write_gpkg(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
         let mut insert = tx
             .prepare("INSERT INTO curves (geom, id, closed, length, confidence, angle, shape, start, \"end\", corners) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)")
             .map_err(out)?;
-        for c in curves {
+        curves.each(&mut |c| {
             let [start, end] = c.end_kinds();
             insert
                 .execute(params![
@@ -107,7 +110,8 @@ pub fn write_gpkg(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
                     c.corner_list()
                 ])
                 .map_err(out)?;
-        }
+            Ok(())
+        })?;
     }
     tx.commit().map_err(out)?;
     db.close().map_err(|(_, e)| out(e))

@@ -52,7 +52,7 @@ impl Format {
     }
 
     /// Writes `curves` in this format.
-    pub fn write(self, path: &std::path::Path, curves: &[Polyline], crs: &crate::crs::Crs) -> crate::Result<()> {
+    pub fn write(self, path: &std::path::Path, curves: &(impl Curves + ?Sized), crs: &crate::crs::Crs) -> crate::Result<()> {
         match self {
             Format::Obj => write_obj(path, curves, crs),
             Format::Ply => write_ply(path, curves, crs),
@@ -60,6 +60,32 @@ impl Format {
             Format::Gpkg => write_gpkg(path, curves, crs),
             Format::Dxf => write_dxf(path, curves, crs),
         }
+    }
+}
+
+/// Curves to write, gone through once or more per output, in order: a slice of them, or a
+/// run's finished curves read back a batch at a time from its working data (so that the
+/// writers never need them all at once).
+pub trait Curves: Sync {
+    /// Calls `f` on every curve, in order, until it fails.
+    fn each(&self, f: &mut dyn FnMut(&Polyline) -> crate::Result<()>) -> crate::Result<()>;
+}
+
+impl Curves for [Polyline] {
+    fn each(&self, f: &mut dyn FnMut(&Polyline) -> crate::Result<()>) -> crate::Result<()> {
+        self.iter().try_for_each(f)
+    }
+}
+
+impl<const N: usize> Curves for [Polyline; N] {
+    fn each(&self, f: &mut dyn FnMut(&Polyline) -> crate::Result<()>) -> crate::Result<()> {
+        self.as_slice().each(f)
+    }
+}
+
+impl Curves for Vec<Polyline> {
+    fn each(&self, f: &mut dyn FnMut(&Polyline) -> crate::Result<()>) -> crate::Result<()> {
+        self.as_slice().each(f)
     }
 }
 

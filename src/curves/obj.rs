@@ -4,7 +4,7 @@
 //! readers skip both).
 //! Corner vertices shared by several curves are written once and referenced by each.
 
-use super::{Polyline, Shape, Vertex};
+use super::{Curves, Polyline, Shape, Vertex};
 use crate::crs::Crs;
 use crate::error::{io_input, Error, Result};
 use glam::DVec3;
@@ -23,66 +23,80 @@ use std::path::Path;
 /// assert_eq!(read_obj(&path)?[0].vertices.len(), 3);
 /// # Ok::<(), crease::Error>(())
 /// ```
-pub fn write_obj(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
+pub fn write_obj(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);
-    write_obj_to(&mut w, curves, crs).and_then(|_| w.flush()).map_err(|e| Error::output(path, e))
+    let out = |e| Error::output(path, e);
+    let mut count = 0;
+    curves.each(&mut |_| {
+        count += 1;
+        Ok(())
+    })?;
+    writeln!(w, "# crease feature curves: {count} polylines").map_err(out)?;
+    if !crs.is_unknown() {
+        writeln!(w, "# crs {}", crs.summary().replace(['\n', '\r'], " ")).map_err(out)?;
+    }
+    // The vertex table, then the lines, which number the vertices again the same way.
+    let mut table = VertexTable::default();
+    curves.each(&mut |c| {
+        for v in &c.vertices {
+            if table.number(v).1 {
+                writeln!(w, "v {} {} {}", v.p.x, v.p.y, v.p.z).map_err(out)?;
+            }
+        }
+        Ok(())
+    })?;
+    let mut table = VertexTable::default();
+    curves.each(&mut |c| write_line(&mut w, c, &mut table).map_err(out))?;
+    w.flush().map_err(out)
 }
 
-fn write_obj_to(w: &mut impl Write, curves: &[Polyline], crs: &Crs) -> std::io::Result<()> {
-    writeln!(w, "# crease feature curves: {} polylines", curves.len())?;
-    if !crs.is_unknown() {
-        writeln!(w, "# crs {}", crs.summary().replace(['\n', '\r'], " "))?;
-    }
-    // Vertex table; corners with identical positions are shared.
-    let mut corner_index: HashMap<[u64; 3], usize> = HashMap::new();
-    let mut lines: Vec<Vec<usize>> = Vec::with_capacity(curves.len());
-    let mut next = 1usize;
-    for c in curves {
-        let mut idx = Vec::with_capacity(c.vertices.len() + 1);
-        for v in &c.vertices {
-            let key = v.p.to_array().map(f64::to_bits);
-            let i = if v.corner {
-                if let Some(&i) = corner_index.get(&key) {
-                    i
-                } else {
-                    corner_index.insert(key, next);
-                    writeln!(w, "v {} {} {}", v.p.x, v.p.y, v.p.z)?;
-                    next += 1;
-                    next - 1
-                }
-            } else {
-                writeln!(w, "v {} {} {}", v.p.x, v.p.y, v.p.z)?;
-                next += 1;
-                next - 1
-            };
-            idx.push(i);
+/// Numbers the vertices as written, from 1; corners with identical positions are shared.
+#[derive(Default)]
+struct VertexTable {
+    corners: HashMap<[u64; 3], usize>,
+    next: usize,
+}
+
+impl VertexTable {
+    /// The number of vertex `v`, and true if it is new (to be written).
+    fn number(&mut self, v: &Vertex) -> (usize, bool) {
+        if v.corner {
+            if let Some(&i) = self.corners.get(&v.p.to_array().map(f64::to_bits)) {
+                return (i, false);
+            }
         }
-        if c.closed && !idx.is_empty() {
-            idx.push(idx[0]);
+        self.next += 1;
+        if v.corner {
+            self.corners.insert(v.p.to_array().map(f64::to_bits), self.next);
         }
-        lines.push(idx);
+        (self.next, true)
     }
-    for (c, idx) in curves.iter().zip(&lines) {
-        writeln!(w, "o curve_{}", c.id)?;
-        writeln!(w, "# confidence {}", c.confidence)?;
-        let [start, end] = c.end_kinds();
-        let angle = c.mean_dihedral_angle().map_or("unknown".to_string(), |a| format!("{a:.1}"));
-        let corners = c.corner_list();
-        writeln!(
-            w,
-            "# length {} angle {angle} shape {} start {start} end {end} corners {}",
-            c.length(),
-            c.shape.name(),
-            if corners.is_empty() { "none" } else { &corners }
-        )?;
-        write!(w, "l")?;
-        for i in idx {
-            write!(w, " {i}")?;
-        }
-        writeln!(w)?;
+}
+
+/// Curve `c`'s object name, attributes and line.
+fn write_line(w: &mut impl Write, c: &Polyline, table: &mut VertexTable) -> std::io::Result<()> {
+    let mut idx: Vec<usize> = c.vertices.iter().map(|v| table.number(v).0).collect();
+    if c.closed && !idx.is_empty() {
+        idx.push(idx[0]);
     }
-    Ok(())
+    writeln!(w, "o curve_{}", c.id)?;
+    writeln!(w, "# confidence {}", c.confidence)?;
+    let [start, end] = c.end_kinds();
+    let angle = c.mean_dihedral_angle().map_or("unknown".to_string(), |a| format!("{a:.1}"));
+    let corners = c.corner_list();
+    writeln!(
+        w,
+        "# length {} angle {angle} shape {} start {start} end {end} corners {}",
+        c.length(),
+        c.shape.name(),
+        if corners.is_empty() { "none" } else { &corners }
+    )?;
+    write!(w, "l")?;
+    for i in idx {
+        write!(w, " {i}")?;
+    }
+    writeln!(w)
 }
 
 /// Reads the polylines of an OBJ file (`l` elements; `f` faces are ignored). A line whose

@@ -5,7 +5,7 @@
 //! has one more edge than an open one. (Files of crease 0.4 and earlier, without the
 //! confidence, and of 0.7 and earlier, without the shape, are read too.)
 
-use super::{Polyline, Shape, Vertex};
+use super::{Curves, Polyline, Shape, Vertex};
 use crate::crs::Crs;
 use crate::error::{io_input, Error, Result};
 use glam::{DVec3, Vec3};
@@ -28,37 +28,25 @@ const SHAPE: &str = "property uchar shape\n";
 /// Bytes of a vertex with the confidence and the shape.
 const VERTEX_BYTES: usize = 3 * 8 + 6 * 4 + 4 + 1 + 4 + 1;
 
-fn shape_code(s: Shape) -> u8 {
-    match s {
-        Shape::Unknown => 0,
-        Shape::Convex => 1,
-        Shape::Concave => 2,
-    }
-}
-
-fn shape_of(code: u8) -> Shape {
-    match code {
-        1 => Shape::Convex,
-        2 => Shape::Concave,
-        _ => Shape::Unknown,
-    }
-}
-
 /// Writes `curves` to `path` as binary little-endian PLY.
-pub fn write_ply(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
+pub fn write_ply(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);
-    let nv: usize = curves.iter().map(|c| c.vertices.len()).sum();
-    let ne: usize = curves.iter().map(|c| c.segment_count()).sum();
-    let r = (|| -> std::io::Result<()> {
-        write!(w, "ply\nformat binary_little_endian 1.0\ncomment crease feature curves\n")?;
-        if !crs.is_unknown() {
-            // (A comment line ends at the line's end: the WKT, which may span lines, is left to
-            // the GeoJSON.)
-            writeln!(w, "comment crs {}", crs.summary().replace(['\n', '\r'], " "))?;
-        }
-        write!(w, "element vertex {nv}\n{HEADER}{CONFIDENCE}{SHAPE}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n")?;
-        for c in curves {
+    let (mut nv, mut ne) = (0usize, 0usize);
+    curves.each(&mut |c| {
+        (nv, ne) = (nv + c.vertices.len(), ne + c.segment_count());
+        Ok(())
+    })?;
+    let out = |e| Error::output(path, e);
+    write!(w, "ply\nformat binary_little_endian 1.0\ncomment crease feature curves\n").map_err(out)?;
+    if !crs.is_unknown() {
+        // (A comment line ends at the line's end: the WKT, which may span lines, is left to
+        // the GeoJSON.)
+        writeln!(w, "comment crs {}", crs.summary().replace(['\n', '\r'], " ")).map_err(out)?;
+    }
+    write!(w, "element vertex {nv}\n{HEADER}{CONFIDENCE}{SHAPE}element edge {ne}\nproperty int vertex1\nproperty int vertex2\nend_header\n").map_err(out)?;
+    curves.each(&mut |c| {
+        let r = (|| -> std::io::Result<()> {
             for v in &c.vertices {
                 for x in v.p.to_array() {
                     w.write_all(&x.to_le_bytes())?;
@@ -71,21 +59,23 @@ pub fn write_ply(path: &Path, curves: &[Polyline], crs: &Crs) -> Result<()> {
                 w.write_all(&(c.id as i32).to_le_bytes())?;
                 w.write_all(&[v.corner as u8])?;
                 w.write_all(&c.confidence.to_le_bytes())?;
-                w.write_all(&[shape_code(c.shape)])?;
+                w.write_all(&[c.shape.code()])?;
             }
+            Ok(())
+        })();
+        r.map_err(out)
+    })?;
+    let mut base = 0i32;
+    curves.each(&mut |c| {
+        let n = c.vertices.len() as i32;
+        for s in 0..c.segment_count() as i32 {
+            w.write_all(&(base + s).to_le_bytes()).map_err(out)?;
+            w.write_all(&(base + (s + 1) % n).to_le_bytes()).map_err(out)?;
         }
-        let mut base = 0i32;
-        for c in curves {
-            let n = c.vertices.len() as i32;
-            for s in 0..c.segment_count() as i32 {
-                w.write_all(&(base + s).to_le_bytes())?;
-                w.write_all(&(base + (s + 1) % n).to_le_bytes())?;
-            }
-            base += n;
-        }
-        w.flush()
-    })();
-    r.map_err(|e| Error::output(path, e))
+        base += n;
+        Ok(())
+    })?;
+    w.flush().map_err(out)
 }
 
 /// Reads polylines written by [`write_ply`].
@@ -127,7 +117,7 @@ pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
         let id = i32_at(o + 48) as u32;
         let corner = body[o + 52] != 0;
         let confidence = if with_confidence { f32_at(o + 53) } else { 1.0 };
-        let shape = if with_shape { shape_of(body[o + 57]) } else { Shape::Unknown };
+        let shape = if with_shape { Shape::of_code(body[o + 57]) } else { Shape::Unknown };
         if curves.last().map(|c| c.id) != Some(id) {
             curves.push(Polyline { id, closed: false, vertices: vec![], confidence, shape });
             first_vertex.push(i);

@@ -36,6 +36,25 @@ impl Shape {
             Shape::Unknown => "unknown",
         }
     }
+
+    /// The code stored for it (in `curves.ply` and the working data): 0 unknown, 1 convex,
+    /// 2 concave.
+    pub fn code(self) -> u8 {
+        match self {
+            Shape::Unknown => 0,
+            Shape::Convex => 1,
+            Shape::Concave => 2,
+        }
+    }
+
+    /// The shape of a stored code (unknown for any other).
+    pub fn of_code(code: u8) -> Shape {
+        match code {
+            1 => Shape::Convex,
+            2 => Shape::Concave,
+            _ => Shape::Unknown,
+        }
+    }
 }
 
 /// Where the scanners saw the surfaces from: what tells convex from concave.

@@ -2,9 +2,9 @@
 //! the size of the edge cloud: the edge cloud is taken a growth block at a time (see
 //! [`crate::extract::blocks`]), and only the polylines are whole.
 
-use super::records::{self, Pieces, Record, Smoothed};
+use super::records::{self, Finished, Pieces, Record, Smoothed};
 use super::{Run, Worker};
-use crate::curves::Polyline;
+use crate::curves::{Curves, Outside, Polyline};
 use crate::error::{Error, Result};
 use crate::extract::blocks::{self, in_box, Blocks, Census, Layers};
 use crate::extract::complete::{self, Curve};
@@ -57,9 +57,10 @@ impl Run<'_> {
     /// 5. per block again: the curves' normals and evidence from the smoothed edge points, a
     ///    batch of groups at a time.
     ///
-    /// None if this process is a worker whose share is done but whose run is not (see
+    /// Returns the number of batches of finished curves written (see [`Run::finished_curves`]),
+    /// or None if this process is a worker whose share is done but whose run is not (see
     /// [`Run::waiting`]).
-    pub(super) fn curves(&mut self, r: &Resolved) -> Result<Option<(Vec<Polyline>, Counts, Timings)>> {
+    pub(super) fn curves(&mut self, r: &Resolved, outside: &Outside) -> Result<Option<(u32, Counts, Timings)>> {
         let t = Instant::now();
         crate::mem::release_free_memory();
         self.curve_peak = Some(crate::mem::PeakSampler::start());
@@ -91,14 +92,15 @@ impl Run<'_> {
             self.opts.debug.points("corners.obj", &grouped, origin);
         }
         let tc = Instant::now();
-        let traced = self.complete(&mut store, &plans, &grouped, &blocks, origin, r)?;
+        let batches = self.complete(&mut store, &plans, &grouped, &blocks, origin, r, outside, &mut counts)?;
         seconds.completion = tc.elapsed().as_secs_f64();
-        let all = traced.len();
-        let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
-        let curves: Vec<Polyline> = traced.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
-        (counts.curves, counts.left_out) = (curves.len() as u64, (all - curves.len()) as u64);
         self.pass.curves = t.elapsed().as_secs_f64();
-        Ok(Some((curves, counts, seconds)))
+        Ok(Some((batches, counts, seconds)))
+    }
+
+    /// The finished curves, of the `batches` batches [`Run::curves`] wrote.
+    pub(super) fn finished_curves(&self, batches: u32) -> FinishedCurves<'_> {
+        FinishedCurves { ws: &self.ws, batches }
     }
 
     /// A tile's edge points, snapped, with its corners and counts.
@@ -367,10 +369,24 @@ impl Run<'_> {
     }
 
     /// Stage 5 on the stitched polylines `plans`, a group at a time (see [`groups`]), each
-    /// batch of groups' curves then attributed (see [`Run::attribute`]): a batch's polylines
-    /// are gathered from the pieces, completed and attributed, and only then the next. The
-    /// curves come in the order of their groups' first polylines.
-    fn complete(&self, store: &mut PieceStore, plans: &[Plan], grouped: &[DVec3], blocks: &Blocks, origin: DVec3, r: &Resolved) -> Result<Vec<Polyline>> {
+    /// batch of groups' curves then attributed (see [`Run::attribute`]), labelled convex or
+    /// concave as seen from `outside`, and those the output filters keep written to the
+    /// working data as a [`Finished`] record: a batch's polylines are gathered from the pieces,
+    /// completed, attributed and written, and only then the next. The curves come in the order
+    /// of their groups' first polylines. Returns the number of batches written; `counts`
+    /// gets the curves kept and left out.
+    #[allow(clippy::too_many_arguments)]
+    fn complete(
+        &self,
+        store: &mut PieceStore,
+        plans: &[Plan],
+        grouped: &[DVec3],
+        blocks: &Blocks,
+        origin: DVec3,
+        r: &Resolved,
+        outside: &Outside,
+        counts: &mut Counts,
+    ) -> Result<u32> {
         let cp = polylines::complete_params(r);
         let reach = cp.reach * cp.step;
         // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
@@ -411,7 +427,9 @@ impl Run<'_> {
         }
         let all = linker.groups();
         let corners = groups::Corners::new(grouped, reach);
-        let mut traced = vec![];
+        let (mut traced, mut written) = (0, 0);
+        (counts.curves, counts.left_out) = (0, 0);
+        self.ws.create_dir(Finished::DIR)?;
         for batch in batches(&mut all.iter().map(|g| g.iter().map(|&i| size(&plans[i as usize])).sum()).enumerate()) {
             let wanted: Vec<&Plan> = batch.iter().flat_map(|&g| all[g].iter().map(|&i| &plans[i as usize])).collect();
             let mut lines = store.lines(&wanted)?.into_iter().zip(wanted).map(|(v, p)| Curve::new(v, p.closed));
@@ -425,10 +443,25 @@ impl Run<'_> {
                 .flatten()
                 .collect();
             self.opts.cancel.check()?;
-            let first = traced.len() as u32;
-            traced.extend(self.attribute(curves, blocks, origin, r, first)?);
+            let attributed = self.attribute(curves, blocks, origin, r, traced)?;
+            traced += attributed.len() as u32;
+            let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
+            let mut kept: Vec<Polyline> = attributed.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
+            outside.label(&mut kept);
+            counts.curves += kept.len() as u64;
+            records::write(&self.ws, written, &Finished(kept))?;
+            written += 1;
         }
-        Ok(traced)
+        counts.left_out = traced as u64 - counts.curves;
+        // (Batches of an earlier invocation beyond this one's are stale.)
+        for k in written.. {
+            let name = records::name(Finished::DIR, k);
+            if !self.ws.exists(&name) {
+                break;
+            }
+            self.ws.remove(&name);
+        }
+        Ok(written)
     }
 
     /// Each curve's vertex normals and evidence, from the smoothed edge points a block at a
@@ -488,6 +521,21 @@ impl Run<'_> {
             self.opts.cancel.check()?;
         }
         Ok(curves.into_iter().zip(gathered).enumerate().map(|(id, (c, g))| polylines::finish(first + id as u32, c, g, origin, step)).collect())
+    }
+}
+
+/// A run's finished curves, kept in its working data a batch at a time (see [`Finished`]).
+pub(super) struct FinishedCurves<'a> {
+    ws: &'a crate::workspace::Workspace,
+    batches: u32,
+}
+
+impl Curves for FinishedCurves<'_> {
+    fn each(&self, f: &mut dyn FnMut(&Polyline) -> Result<()>) -> Result<()> {
+        for b in 0..self.batches {
+            records::read::<Finished>(self.ws, b)?.0.iter().try_for_each(&mut *f)?;
+        }
+        Ok(())
     }
 }
 

@@ -32,7 +32,7 @@ pub use plan::{tile_size_for, BYTES_PER_POINT, MAX_TILE_POINTS};
 pub use status::{render_status, status, Status};
 
 use crate::cancel::Cancel;
-use crate::curves::{Format, Outside, Polyline, Shape};
+use crate::curves::{Curves, Format, Outside, Polyline, Shape};
 use crate::debug::DebugDump;
 use crate::error::{Error, Result};
 use crate::extract::candidates::{self, ResidualSum};
@@ -230,9 +230,17 @@ pub struct ShapeCounts {
 }
 
 impl ShapeCounts {
-    fn of(curves: &[Polyline]) -> ShapeCounts {
-        let count = |s: Shape| curves.iter().filter(|c| c.shape == s).count() as u64;
-        ShapeCounts { convex: count(Shape::Convex), concave: count(Shape::Concave), unknown: count(Shape::Unknown) }
+    fn of(curves: &(impl Curves + ?Sized)) -> Result<ShapeCounts> {
+        let mut n = ShapeCounts::default();
+        curves.each(&mut |c| {
+            *match c.shape {
+                Shape::Convex => &mut n.convex,
+                Shape::Concave => &mut n.concave,
+                Shape::Unknown => &mut n.unknown,
+            } += 1;
+            Ok(())
+        })?;
+        Ok(n)
     }
 }
 
@@ -411,19 +419,22 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
     };
     let tau = run.tau;
-    let Some((mut curves, counts, seconds)) = run.curves(&r)? else {
+    let outside = opts.outside.clone().unwrap_or_else(|| scanned_from(&headers));
+    let Some((batches, counts, seconds)) = run.curves(&r, &outside)? else {
         return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
     };
+    let curves = run.finished_curves(batches);
+    let shapes = ShapeCounts::of(&curves)?;
+    let t = Instant::now();
+    write_outputs(run.ws.root(), &curves, &crs, &run.preview_sample()?, &opts.formats)?;
+    run.finished(t)?;
     for h in &headers {
         warnings.extend(coarse_coordinates(h, &run.manifest.grid, r.kappa));
     }
-    let outside = opts.outside.clone().unwrap_or_else(|| scanned_from(&headers));
-    outside.label(&mut curves);
-    run.write(&curves, &crs)?;
     let mut report = run.report(files, r, tau, counts, seconds, t0, resumed);
     report.warnings = warnings.into_list();
     report.crs = crs;
-    report.shapes = ShapeCounts::of(&curves);
+    report.shapes = shapes;
     report.outside = outside;
     run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
     if opts.clean {
@@ -540,9 +551,16 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
     let mut run = Run::new(ws, manifest, opts, None);
     // (A lone run does every tile itself: it has nothing to wait for.)
     let r = run.tile_passes(&Input::Points(points), params, &here)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
-    let (mut curves, counts, seconds) = run.curves(&r)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
     // (Points in memory give no scanner positions: only `outside` tells the shapes.)
-    opts.outside.clone().unwrap_or_default().label(&mut curves);
+    let outside = opts.outside.clone().unwrap_or_default();
+    let Some((batches, counts, seconds)) = run.curves(&r, &outside)? else {
+        return Err(Error::Usage(run.waiting.take().unwrap_or_default()));
+    };
+    let (finished, mut curves) = (run.finished_curves(batches), vec![]);
+    finished.each(&mut |c| {
+        curves.push(c.clone());
+        Ok(())
+    })?;
     Ok(Extraction { curves, params: r, tau: run.tau, counts, seconds })
 }
 
@@ -638,7 +656,8 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
 }
 
 /// The top-level names of a run's working data: the tile store and the per-tile results.
-const WORKING: [&str; 7] = [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, curves::Survey::DIR, records::Smoothed::DIR, records::Pieces::DIR];
+const WORKING: [&str; 8] =
+    [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, curves::Survey::DIR, records::Smoothed::DIR, records::Pieces::DIR, records::Finished::DIR];
 
 /// Name of the file by which a work directory names the run directory it belongs to.
 const WORK_OWNER: &str = "crease-run";
@@ -951,10 +970,9 @@ impl<'a> Run<'a> {
         manifest::save(&self.ws, &self.manifest)
     }
 
-    /// The write step: the outputs, then the manifest marked finished.
-    fn write(&mut self, curves: &[Polyline], crs: &Crs) -> Result<()> {
-        let t = Instant::now();
-        write_outputs(self.ws.root(), curves, crs, &self.preview_sample()?, &self.opts.formats)?;
+    /// The end of the write step, begun at `t` once the outputs are written: the manifest
+    /// marked finished.
+    fn finished(&mut self, t: Instant) -> Result<()> {
         self.manifest.finished = true;
         manifest::save(&self.ws, &self.manifest)?;
         self.pass.writing = t.elapsed().as_secs_f64();
@@ -1064,7 +1082,7 @@ pub const OUTPUTS: [&str; 7] = ["curves.obj", "curves.ply", "curves.geojson", "c
 /// Written on demand by [`write_view`].
 const VIEW: &str = "view.html";
 
-fn write_outputs(dir: &Path, curves: &[crate::curves::Polyline], crs: &Crs, sample: &[DVec3], formats: &[Format]) -> Result<()> {
+fn write_outputs(dir: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, sample: &[DVec3], formats: &[Format]) -> Result<()> {
     // Each output goes to a temporary name first, then is renamed into place.
     let tmp = dir.join("out.tmp");
     std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;

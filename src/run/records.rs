@@ -4,6 +4,7 @@
 
 use super::curves::Survey;
 use crate::codec::{self, Reader, Writer};
+use crate::curves::{Polyline, Shape, Vertex};
 use crate::error::{Error, Result};
 use crate::extract::blocks::{Block, Blocks, Piece};
 use crate::extract::candidates::{Residual, TileResiduals};
@@ -159,6 +160,46 @@ impl Record for Edges {
         let n = r.count(32)?;
         let corners = (0..n).map(|_| Ok(WorldCorner { p: dvec3(r)?, w: r.f64()? })).collect::<Result<_>>()?;
         Ok(Edges(TileEdges { edges, corners, candidates, one_surface, scattered }))
+    }
+}
+
+/// A batch of the run's finished curves, numbered in order: what the curve stage hands the
+/// writers, so that it need not hold every curve at once (see [`super::curves`]).
+pub struct Finished(pub Vec<Polyline>);
+
+impl Record for Finished {
+    const KIND: [u8; 4] = *b"CURV";
+    const DIR: &'static str = "finished";
+
+    fn encode(&self, w: &mut Writer) {
+        w.u64(self.0.len() as u64);
+        for c in &self.0 {
+            w.u32(c.id);
+            w.u8(c.closed as u8);
+            w.f32(c.confidence);
+            w.u8(c.shape.code());
+            w.u64(c.vertices.len() as u64);
+            for v in &c.vertices {
+                put_edge(w, v.p, &v.n);
+                w.u8(v.corner as u8);
+            }
+        }
+    }
+
+    fn decode(r: &mut Reader) -> Result<Self> {
+        let n = r.count(18)?;
+        let mut curves = Vec::with_capacity(n);
+        for _ in 0..n {
+            let (id, closed, confidence, shape) = (r.u32()?, r.u8()? != 0, r.f32()?, Shape::of_code(r.u8()?));
+            let nv = r.count(49)?;
+            let mut vertices = Vec::with_capacity(nv);
+            for _ in 0..nv {
+                let (p, n) = get_edge(r)?;
+                vertices.push(Vertex { p, n, corner: r.u8()? != 0 });
+            }
+            curves.push(Polyline { id, closed, vertices, confidence, shape });
+        }
+        Ok(Finished(curves))
     }
 }
 
