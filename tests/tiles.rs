@@ -113,6 +113,27 @@ fn the_curve_stage_resumes_from_its_blocks() {
     assert_eq!((again.counts.unconfirmed, again.counts.grown), (first.counts.unconfirmed, first.counts.grown));
 }
 
+/// The curve stage completes, attributes and writes its curves a batch of groups at a time,
+/// as many as `--memory` asks: the curves do not depend on how many.
+#[test]
+fn curves_completed_in_batches_are_the_curves_completed_at_once() {
+    let d = tempfile::tempdir().unwrap();
+    let input = vec![fixture("holecube.las")];
+    let run = |name: &str, memory: u64| {
+        let out = d.path().join(name);
+        let r = run_extract(&input, &out, &Params::default(), &Filter::default(), &RunOptions { memory, ..opts(None) }).unwrap();
+        (r.counts, outputs(&out))
+    };
+    let (whole, at_once) = run("whole", 1 << 30);
+    // (A sixteenth of 0.6 MB holds about 270 vertices: less than the cube's outline, a group
+    // of its own, and its holes' rims.)
+    let (batched, in_batches) = run("batched", 600_000);
+    assert_eq!(whole.batches, 1);
+    assert!(batched.batches >= 2, "{} batches", batched.batches);
+    assert!(in_batches == at_once, "the curves differ when completed in {} batches", batched.batches);
+    assert_eq!((batched.curves, batched.grown, batched.left_out), (whole.curves, whole.grown, whole.left_out));
+}
+
 fn crease() -> Command {
     Command::new(env!("CARGO_BIN_EXE_crease"))
 }

@@ -71,6 +71,10 @@ pub struct Counts {
     /// Curves left out for confidence or length below `--min-confidence` or `--min-length`.
     #[serde(default)]
     pub left_out: u64,
+    /// Batches in which the curve stage completed, attributed and wrote the curves (see
+    /// [`groups`]): more as the curves outgrow a sixteenth of `--memory`.
+    #[serde(default)]
+    pub batches: u64,
 }
 
 /// Seconds per stage.

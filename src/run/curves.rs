@@ -390,7 +390,7 @@ impl Run<'_> {
         let cp = polylines::complete_params(r);
         let reach = cp.reach * cp.step;
         // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
-        let budget = (self.opts.memory / 16 / 140).max(1 << 14) as usize;
+        let budget = (self.opts.memory / 16 / 140).max(256) as usize;
         let size = |p: &Plan| p.parts.iter().map(|&(k, _)| store.ends[k as usize].len as usize).sum::<usize>();
         let batches = |items: &mut dyn Iterator<Item = (usize, usize)>| {
             let mut out: Vec<Vec<usize>> = vec![vec![]];
@@ -453,6 +453,7 @@ impl Run<'_> {
             written += 1;
         }
         counts.left_out = traced as u64 - counts.curves;
+        counts.batches = written as u64;
         // (Batches of an earlier invocation beyond this one's are stale.)
         for k in written.. {
             let name = records::name(Finished::DIR, k);
