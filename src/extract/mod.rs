@@ -9,7 +9,7 @@
 //! | 2. robust projection, corners | [`project`] | [`project::tile_edges`] |
 //! | 3. smoothing, consensus filter | [`smooth`], [`consensus`] | [`polylines::smooth_and_confirm`] (per growth block, [`blocks`]) |
 //! | 4. growing | [`grow`] | [`polylines::grow_block`], then [`stitch`] |
-//! | 5. completion | [`complete`] | [`polylines::complete_lines`] (whole) |
+//! | 5. completion | [`complete`] | per group of polylines that can act on each other ([`groups`]) |
 //!
 //! [`neighbourhood`] holds a tile's points indexed for neighbour queries, [`fit`] the small
 //! fits every stage uses. The pipeline that runs the stages over tiles is [`crate::run`].

@@ -1,6 +1,10 @@
-//! The curve stage (stages 3-5) over the edge points of every tile, in memory bounded whatever
-//! the size of the edge cloud: the edge cloud is taken a growth block at a time (see
-//! [`crate::extract::blocks`]), and only the polylines are whole.
+//! The curve stage (stages 3-5) over the edge points of every tile, in memory that grows with
+//! the number of polylines, not with the edge points or the polylines' vertices: the edge
+//! cloud is taken a growth block at a time (see [`crate::extract::blocks`]); the stitched
+//! polylines are planned from their pieces' ends and
+//! gathered from the blocks' records when needed; completion takes a batch of groups of them
+//! at a time (see [`groups`]), and the finished curves go to the working data batch by batch,
+//! for the writers to read back.
 
 use super::records::{self, Finished, Pieces, Record, Smoothed};
 use super::{Run, Worker};
@@ -84,7 +88,10 @@ impl Run<'_> {
         let merge = stitch::MERGE_STEPS * r.step;
         let plans = stitch::plan(&ends, stitch::JOIN_STEPS * r.step, merge);
         counts.grown = plans.len() as u64;
-        let mut store = PieceStore { run: self, ends: &ends, first: &first, merge, recent: Recent::new(self.opts.memory / 16 / 48) };
+        // (Once planned, a piece is only its block and size: its ends are dropped.)
+        let pieces: Vec<(u32, u32)> = ends.iter().map(|e| (e.block, e.len)).collect();
+        drop(ends);
+        let mut store = PieceStore { run: self, pieces: &pieces, first: &first, merge, recent: Recent::new(self.opts.memory / 16 / 48) };
         if self.opts.debug.on() {
             let lines = store.lines(&plans.iter().collect::<Vec<_>>())?;
             let pl: Vec<Polyline> = lines.iter().enumerate().map(|(i, l)| Polyline::from_points(i as u32, l.iter().map(|p| *p + origin))).collect();
@@ -93,6 +100,10 @@ impl Run<'_> {
         }
         let tc = Instant::now();
         let batches = self.complete(&mut store, &plans, &grouped, &blocks, origin, r, outside, &mut counts)?;
+        drop(store);
+        drop((plans, pieces));
+        // (What the stage freed goes back to the system before the outputs are written.)
+        crate::mem::release_free_memory();
         seconds.completion = tc.elapsed().as_secs_f64();
         self.pass.curves = t.elapsed().as_secs_f64();
         Ok(Some((batches, counts, seconds)))
@@ -391,7 +402,7 @@ impl Run<'_> {
         let reach = cp.reach * cp.step;
         // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
         let budget = (self.opts.memory / 16 / 140).max(256) as usize;
-        let size = |p: &Plan| p.parts.iter().map(|&(k, _)| store.ends[k as usize].len as usize).sum::<usize>();
+        let size = |p: &Plan| p.parts.iter().map(|&(k, _)| store.pieces[k as usize].1 as usize).sum::<usize>();
         let batches = |items: &mut dyn Iterator<Item = (usize, usize)>| {
             let mut out: Vec<Vec<usize>> = vec![vec![]];
             let mut held = 0;
@@ -543,7 +554,8 @@ impl Curves for FinishedCurves<'_> {
 /// The pieces' vertices, read from their blocks' records as the polylines are gathered.
 struct PieceStore<'a> {
     run: &'a Run<'a>,
-    ends: &'a [PieceEnds],
+    /// Each piece's block and number of vertices.
+    pieces: &'a [(u32, u32)],
     first: &'a [u32],
     merge: f64,
     recent: Recent<Pieces>,
@@ -552,13 +564,13 @@ struct PieceStore<'a> {
 impl PieceStore<'_> {
     /// The vertices of the polylines `plans`, in order.
     fn lines(&mut self, plans: &[&Plan]) -> Result<Vec<Vec<DVec3>>> {
-        let mut wanted: Vec<u32> = plans.iter().flat_map(|p| p.parts.iter().map(|&(k, _)| self.ends[k as usize].block)).collect();
+        let mut wanted: Vec<u32> = plans.iter().flat_map(|p| p.parts.iter().map(|&(k, _)| self.pieces[k as usize].0)).collect();
         wanted.sort_unstable();
         wanted.dedup();
         let ws = &self.run.ws;
         let held = self.recent.get(&wanted, |b| records::read::<Pieces>(ws, b))?;
         let piece = |k: u32| {
-            let b = self.ends[k as usize].block;
+            let b = self.pieces[k as usize].0;
             let record = &held[wanted.binary_search(&b).unwrap_or_default()];
             &record.pieces[(k - self.first[b as usize]) as usize].v[..]
         };
