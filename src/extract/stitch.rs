@@ -99,17 +99,7 @@ pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> Vec<Plan> {
             out.push(Plan { parts: vec![(p as u32, false)], closed: true, round: false, ends: None });
             continue;
         }
-        // Back to the chain's first piece (or round a loop to this one).
-        let (mut at, mut end) = (p, 0);
-        let mut closed = false;
-        while let Some((q, f)) = links[at][end] {
-            (at, end) = (q, 1 - f);
-            if at == p {
-                closed = true;
-                break;
-            }
-        }
-        let (first, mut enter) = if closed { (p, 0) } else { (at, end) };
+        let (first, mut enter, closed) = chain_start(&links, p);
         // The line's vertex count and end vertices as `gather` will join them.
         let (mut count, mut ends) = (0usize, [DVec3::ZERO; 2]);
         let mut parts = vec![];
@@ -151,6 +141,20 @@ pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> Vec<Plan> {
         }
     }
     out
+}
+
+/// Where the chain of linked pieces through piece `p` starts: its first piece and the end it
+/// is entered by, back along the links; or, if the links come round to `p`, `p` itself and
+/// true (a closed chain).
+fn chain_start(links: &[[Option<(usize, usize)>; 2]], p: usize) -> (usize, usize, bool) {
+    let (mut at, mut end) = (p, 0);
+    while let Some((q, f)) = links[at][end] {
+        (at, end) = (q, 1 - f);
+        if at == p {
+            return (p, 0, true);
+        }
+    }
+    (at, end, false)
 }
 
 /// The vertices of the polyline `plan`, from the vertices of each piece (`piece`, by number).
@@ -269,15 +273,7 @@ mod tests {
             if seen[p] {
                 continue;
             }
-            let (mut at, mut end, mut closed) = (p, 0, false);
-            while let Some((q, f)) = links[at][end] {
-                (at, end) = (q, 1 - f);
-                if at == p {
-                    closed = true;
-                    break;
-                }
-            }
-            let (first, mut enter) = if closed { (p, 0) } else { (at, end) };
+            let (first, mut enter, closed) = chain_start(&links, p);
             let (mut v, mut at) = (vec![], first);
             loop {
                 seen[at] = true;
