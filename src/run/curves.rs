@@ -402,46 +402,12 @@ impl Run<'_> {
         let reach = cp.reach * cp.step;
         // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
         let budget = (self.opts.memory / 16 / 140).max(256) as usize;
-        let size = |p: &Plan| p.parts.iter().map(|&(k, _)| store.pieces[k as usize].1 as usize).sum::<usize>();
-        let batches = |items: &mut dyn Iterator<Item = (usize, usize)>| {
-            let mut out: Vec<Vec<usize>> = vec![vec![]];
-            let mut held = 0;
-            for (i, n) in items {
-                if held >= budget {
-                    out.push(vec![]);
-                    held = 0;
-                }
-                out.last_mut().unwrap().push(i);
-                held += n;
-            }
-            out
-        };
-        // The groups: each open polyline's ends, then every polyline's vertices, in batches.
-        let mut ends = vec![];
-        for (i, p) in plans.iter().enumerate().filter(|(_, p)| !p.closed) {
-            let [a, b] = match p.ends {
-                Some(e) => e,
-                None => {
-                    let v = store.lines(&[p])?.remove(0);
-                    [v[0], v[v.len() - 1]]
-                }
-            };
-            ends.extend([(i as u32, a), (i as u32, b)]);
-        }
-        let mut linker = groups::Linker::new(plans.len(), ends, reach);
-        for batch in batches(&mut plans.iter().map(size).enumerate()) {
-            let lines = store.lines(&batch.iter().map(|&i| &plans[i]).collect::<Vec<_>>())?;
-            let near: Vec<Vec<u32>> = lines.par_iter().map(|v| linker.near(v)).collect();
-            for (&i, others) in batch.iter().zip(near) {
-                linker.link(i as u32, &others);
-            }
-        }
-        let all = linker.groups();
+        let all = self.groups(store, plans, reach, budget)?;
         let corners = groups::Corners::new(grouped, reach);
         let (mut traced, mut written) = (0, 0);
         (counts.curves, counts.left_out) = (0, 0);
         self.ws.create_dir(Finished::DIR)?;
-        for batch in batches(&mut all.iter().map(|g| g.iter().map(|&i| size(&plans[i as usize])).sum()).enumerate()) {
+        for batch in batches(all.iter().map(|g| g.iter().map(|&i| store.size(&plans[i as usize])).sum()), budget) {
             let wanted: Vec<&Plan> = batch.iter().flat_map(|&g| all[g].iter().map(|&i| &plans[i as usize])).collect();
             let mut lines = store.lines(&wanted)?.into_iter().zip(wanted).map(|(v, p)| Curve::new(v, p.closed));
             let groups: Vec<Vec<Curve>> = batch.iter().map(|&g| lines.by_ref().take(all[g].len()).collect()).collect();
@@ -474,6 +440,32 @@ impl Run<'_> {
             self.ws.remove(&name);
         }
         Ok(written)
+    }
+
+    /// The groups of the polylines `plans` that completion can complete apart (see
+    /// [`groups`]): each open polyline's ends, then every polyline's vertices, gathered in
+    /// batches of about `budget` vertices, linked to the ends near them.
+    fn groups(&self, store: &mut PieceStore, plans: &[Plan], reach: f64, budget: usize) -> Result<Vec<Vec<u32>>> {
+        let mut ends = vec![];
+        for (i, p) in plans.iter().enumerate().filter(|(_, p)| !p.closed) {
+            let [a, b] = match p.ends {
+                Some(e) => e,
+                None => {
+                    let v = store.lines(&[p])?.remove(0);
+                    [v[0], v[v.len() - 1]]
+                }
+            };
+            ends.extend([(i as u32, a), (i as u32, b)]);
+        }
+        let mut linker = groups::Linker::new(plans.len(), ends, reach);
+        for batch in batches(plans.iter().map(|p| store.size(p)), budget) {
+            let lines = store.lines(&batch.iter().map(|&i| &plans[i]).collect::<Vec<_>>())?;
+            let near: Vec<Vec<u32>> = lines.par_iter().map(|v| linker.near(v)).collect();
+            for (&i, others) in batch.iter().zip(near) {
+                linker.link(i as u32, &others);
+            }
+        }
+        Ok(linker.groups())
     }
 
     /// Each curve's vertex normals and evidence, from the smoothed edge points a block at a
@@ -551,6 +543,22 @@ impl Curves for FinishedCurves<'_> {
     }
 }
 
+/// The items of sizes `sizes`, by number, in runs of consecutive items whose sizes add up to
+/// `budget` or just past it (one run, empty, if there are none).
+fn batches(sizes: impl Iterator<Item = usize>, budget: usize) -> Vec<Vec<usize>> {
+    let mut out: Vec<Vec<usize>> = vec![vec![]];
+    let mut held = 0;
+    for (i, n) in sizes.enumerate() {
+        if held >= budget {
+            out.push(vec![]);
+            held = 0;
+        }
+        out.last_mut().unwrap().push(i);
+        held += n;
+    }
+    out
+}
+
 /// The pieces' vertices, read from their blocks' records as the polylines are gathered.
 struct PieceStore<'a> {
     run: &'a Run<'a>,
@@ -562,6 +570,12 @@ struct PieceStore<'a> {
 }
 
 impl PieceStore<'_> {
+    /// The number of vertices of the pieces of `plan` (a few more than its own, where their
+    /// ends were merged).
+    fn size(&self, plan: &Plan) -> usize {
+        plan.parts.iter().map(|&(k, _)| self.pieces[k as usize].1 as usize).sum()
+    }
+
     /// The vertices of the polylines `plans`, in order.
     fn lines(&mut self, plans: &[&Plan]) -> Result<Vec<Vec<DVec3>>> {
         let mut wanted: Vec<u32> = plans.iter().flat_map(|p| p.parts.iter().map(|&(k, _)| self.pieces[k as usize].0)).collect();
