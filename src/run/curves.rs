@@ -1,10 +1,9 @@
 //! The curve stage (stages 3-5) over the edge points of every tile, in memory that grows with
 //! the number of polylines, not with the edge points or the polylines' vertices: the edge
 //! cloud is taken a growth block at a time (see [`crate::extract::blocks`]); the stitched
-//! polylines are planned from their pieces' ends and
-//! gathered from the blocks' records when needed; completion takes a batch of groups of them
-//! at a time (see [`groups`]), and the finished curves go to the working data batch by batch,
-//! for the writers to read back.
+//! polylines are planned from their pieces' ends and gathered from the blocks' records when
+//! needed; completion takes a batch of groups of them at a time (see [`groups`]), and the
+//! finished curves go to the working data batch by batch, for the writers to read back.
 
 use super::records::{self, Finished, Pieces, Record, Smoothed};
 use super::{Run, Worker};
@@ -404,6 +403,7 @@ impl Run<'_> {
         let budget = (self.opts.memory / 16 / 140).max(256) as usize;
         let all = self.groups(store, plans, reach, budget)?;
         let corners = groups::Corners::new(grouped, reach);
+        let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
         let (mut traced, mut written) = (0, 0);
         (counts.curves, counts.left_out) = (0, 0);
         self.ws.create_dir(Finished::DIR)?;
@@ -422,7 +422,6 @@ impl Run<'_> {
             self.opts.cancel.check()?;
             let attributed = self.attribute(curves, blocks, origin, r, traced)?;
             traced += attributed.len() as u32;
-            let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
             let mut kept: Vec<Polyline> = attributed.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
             outside.label(&mut kept);
             counts.curves += kept.len() as u64;
