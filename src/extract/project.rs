@@ -196,7 +196,7 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges 
         max_rms: (SURFACE_NOISE * r.surface_noise).max(0.25 * r.scale),
     };
     let projected = project(cloud, candidates, &ids, &pp);
-    let one_surface = projected.iter().filter(|x| x.surfaces == 1).count() as u64;
+    let one_surface = projected.iter().filter(|x| x.surfaces == 1 && !x.scattered).count() as u64;
     let scattered = projected.iter().filter(|x| x.scattered).count() as u64;
     let o = cloud.origin;
     let edges = projected.iter().filter_map(|x| x.edge).map(|e| WorldEdge { p: e.p + o, n: [e.n[0].as_vec3(), e.n[1].as_vec3()] }).collect();
@@ -245,6 +245,11 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     let mut surfaces: Vec<Surface> = Vec::new();
     while s.remaining.len() >= min_count && surfaces.len() < MAX_SURFACES {
         let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count, SEED_FLOOR * p.noise) else { break };
+        // The first surface is the best fitting one here (least quantile of squares). If even
+        // it fits worse than an edge's surfaces may, the neighbourhood is scatter.
+        if surfaces.is_empty() && surf.threshold > 3.0 * p.max_rms {
+            return Projected { surfaces: 1, scattered: true, ..Default::default() };
+        }
         // A "new" surface (nearly) parallel to one already found is the same surface's
         // leftovers. (How sharp a crease is can only be told once its edge is known: see
         // `Wedge::crease_angle`.)
@@ -686,6 +691,24 @@ mod tests {
             let pts = noisy_patch(seed, |x, _| 0.4 - (0.16 - x * x).sqrt());
             let (q, _) = fit_surface(&pts, &all, DVec3::Z, 1e-4).unwrap();
             assert!(curved(&q), "seed {seed}: the cylinder was not fitted as curved");
+        }
+    }
+
+    #[test]
+    fn volumetric_scatter_is_dropped_as_scatter_once_its_best_surface_fails() {
+        // A tree crown: points uniform in a cube of side 0.6, far thicker than the noise. Its
+        // best-fitting "surface" already fits worse than an edge's surfaces may, so each
+        // candidate is scatter without a search for more surfaces (which took a third of the
+        // projection of a cluttered scene) and is not counted as an outlier on one surface.
+        let mut rng = Rng::stream(3, 0);
+        let world: Vec<DVec3> = (0..20_000).map(|_| DVec3::new(rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), rng.range(-0.3, 0.3))).collect();
+        let cloud = Cloud::new(&world);
+        let candidates: Vec<u32> = (0..cloud.len() as u32).filter(|&i| (cloud.at(i as usize) + cloud.origin).length() < 0.1).collect();
+        let ids: Vec<u64> = candidates.iter().map(|&i| i as u64).collect();
+        let out = project(&cloud, &candidates, &ids, &test_params(0.1, 0.005));
+        assert!(candidates.len() > 50);
+        for r in &out {
+            assert!(r.scattered && r.edge.is_none() && r.surfaces == 1, "{r:?}");
         }
     }
 
