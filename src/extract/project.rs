@@ -67,8 +67,9 @@ pub struct Projected {
     pub corner: Option<CornerPoint>,
     /// Number of surfaces found.
     pub surfaces: u8,
-    /// True if two surfaces met here but one of them fitted its points worse than a surface
-    /// does (see [`SURFACE_NOISE`]): scatter, such as vegetation, not an edge.
+    /// True if a surface that an edge here would need fitted its points worse than a surface
+    /// does (see [`SURFACE_NOISE`]): one of the two meeting here, or already the best-fitting
+    /// one, found first. Scatter, such as vegetation, not an edge.
     pub scattered: bool,
 }
 
@@ -698,8 +699,8 @@ mod tests {
     fn volumetric_scatter_is_dropped_as_scatter_once_its_best_surface_fails() {
         // A tree crown: points uniform in a cube of side 0.6, far thicker than the noise. Its
         // best-fitting "surface" already fits worse than an edge's surfaces may, so each
-        // candidate is scatter without a search for more surfaces (which took a third of the
-        // projection of a cluttered scene) and is not counted as an outlier on one surface.
+        // candidate is scatter, found without a search for more surfaces, and not an outlier
+        // on one surface.
         let mut rng = Rng::stream(3, 0);
         let world: Vec<DVec3> = (0..20_000).map(|_| DVec3::new(rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), rng.range(-0.3, 0.3))).collect();
         let cloud = Cloud::new(&world);
