@@ -231,6 +231,15 @@ struct Surface {
     threshold: f64,
 }
 
+impl Surface {
+    /// True if the surface fits its points worse than a surface meeting another at an edge
+    /// point may: its threshold (three times its RMS, or the smallest threshold) is above
+    /// three times `max_rms`.
+    fn too_rough(&self, max_rms: f64) -> bool {
+        self.threshold > 3.0 * max_rms
+    }
+}
+
 fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32, f32)], s: &mut Scratch) -> Projected {
     let x = cloud.at(i);
     s.pts.clear();
@@ -248,7 +257,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
         let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count, SEED_FLOOR * p.noise) else { break };
         // The first surface is the best fitting one here (least quantile of squares). If even
         // it fits worse than an edge's surfaces may, the neighbourhood is scatter.
-        if surfaces.is_empty() && surf.threshold > 3.0 * p.max_rms {
+        if surfaces.is_empty() && surf.too_rough(p.max_rms) {
             return Projected { surfaces: 1, scattered: true, ..Default::default() };
         }
         // A "new" surface (nearly) parallel to one already found is the same surface's
@@ -270,8 +279,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     let k = surfaces.len().min(3);
     let tol = 1e-7 * p.radius;
     refine(&mut surfaces[..k], &s.pts, x, p.min_threshold, tol);
-    // (A surface's threshold is three times its RMS, or the smallest threshold.)
-    if surfaces[..2].iter().any(|sf| sf.threshold > 3.0 * p.max_rms) {
+    if surfaces[..2].iter().any(|sf| sf.too_rough(p.max_rms)) {
         out.scattered = true;
         return out;
     }
