@@ -1,7 +1,7 @@
 //! Extraction quality against ground truth on the committed fixtures, the angle sweep, and
 //! determinism across thread counts. Larger (500 k-point) runs live in scripts/quality.sh.
 
-mod common;
+use crate::common;
 
 use crease::curves::{read_obj, Polyline};
 use crease::eval::{evaluate, EvalOptions, Scores};

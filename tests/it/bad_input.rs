@@ -1,7 +1,7 @@
 //! Bad input: every case exits with code 65 (bad input data; 2 is for usage errors) and one
 //! line naming the file and the problem, never a panic.
 
-mod common;
+use crate::common;
 
 use crease::error::exit;
 use std::path::{Path, PathBuf};

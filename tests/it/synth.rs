@@ -1,6 +1,6 @@
 //! Ground-truth generation: shapes, mesh sampling, scene, determinism and the noise model.
 
-mod common;
+use crate::common;
 
 use crease::curves::read_obj;
 use crease::io::{read_header, Filter, PointReader};

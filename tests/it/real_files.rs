@@ -1,6 +1,6 @@
 //! Reader tests on the real LAS/LAZ files in `../shared/data/real` (ignored unless run with --include-ignored, as `.ci/run` does when they are there).
 
-mod common;
+use crate::common;
 
 use crease::io::{read_header, scan_bounds, Filter, PointReader};
 use std::path::PathBuf;
