@@ -26,17 +26,158 @@ fn normal_key(n: &[glam::Vec3; 2]) -> [[u32; 3]; 2] {
     [n[0].to_array(), n[1].to_array()].map(|v| v.map(f32::to_bits))
 }
 
-/// Corner grouping over all corner points of the cloud, in any order; the grouped corners are
-/// returned relative to `origin`.
-pub fn group_corners(mut corners: Vec<WorldCorner>, origin: DVec3, r: &Resolved) -> Vec<DVec3> {
-    let q = snap_quantum(r.kappa);
-    for c in corners.iter_mut() {
-        c.p = snap(c.p, q);
-        c.w = (c.w * q).round() / q;
+/// Groups with fewer corner points than this are taken as accidental.
+const MIN_CORNER_SUPPORT: usize = 3;
+
+/// Corner grouping (see [`project::group_corners`]) over the corner points of the whole cloud,
+/// taken a part of it (a run's tile) at a time, with the groups in the order grouping all of
+/// them at once gives, relative to an origin.
+///
+/// Grouping links only corner points within the corner radius of each other, so each linked
+/// set (a component) is grouped alone as it is among all the others. A part's components with
+/// no point within the radius of another part's corners are grouped with the part
+/// ([`CornerGrouping::part`]); only the others are kept, to be grouped together at the end
+/// ([`CornerGrouping::finish`]): the corner points near the parts' borders, not the cloud's.
+pub struct CornerGrouping {
+    origin: DVec3,
+    q: f64,
+    radius: f64,
+    /// The bounds of each part's snapped corner points, relative to the origin (none if the
+    /// part has none).
+    boxes: Vec<Option<(DVec3, DVec3)>>,
+}
+
+/// A group of corner points: the member that stands for it (relative to the origin), and the
+/// weight and position of its seed, which set its place in the order of all groups.
+#[derive(Clone, Copy, Debug)]
+pub struct CornerGroup {
+    at: DVec3,
+    w: f64,
+    key: [u64; 3],
+}
+
+/// What a part's corner points give: their groups, and the components to be grouped with
+/// those of other parts.
+#[derive(Debug, Default)]
+pub struct PartCorners {
+    groups: Vec<CornerGroup>,
+    shared: Vec<WorldCorner>,
+}
+
+impl CornerGrouping {
+    /// The snapped bounds of `corners` (none if empty), for [`CornerGrouping::new`].
+    pub fn bounds(corners: &[WorldCorner], r: &Resolved) -> Option<(DVec3, DVec3)> {
+        let q = snap_quantum(r.kappa);
+        let p = corners.iter().map(|c| snap(c.p, q));
+        p.clone().reduce(DVec3::min).zip(p.reduce(DVec3::max))
     }
-    corners.sort_unstable_by(|a, b| bits_key(a.p).cmp(&bits_key(b.p)).then(a.w.total_cmp(&b.w)));
-    let local: Vec<project::CornerPoint> = corners.iter().map(|c| project::CornerPoint { p: c.p - origin, w: c.w }).collect();
-    project::group_corners(&local, r.corner_radius, 3)
+
+    /// Grouping of the corner points of parts whose [`CornerGrouping::bounds`] are `bounds`,
+    /// the groups relative to `origin`.
+    pub fn new(bounds: &[Option<(DVec3, DVec3)>], origin: DVec3, r: &Resolved) -> CornerGrouping {
+        let boxes = bounds.iter().map(|b| b.map(|(lo, hi)| (lo - origin, hi - origin))).collect();
+        CornerGrouping { origin, q: snap_quantum(r.kappa), radius: r.corner_radius, boxes }
+    }
+
+    /// The groups of the components of part `part`'s corner points that are its alone; the
+    /// other components' points are kept for [`CornerGrouping::finish`].
+    pub fn part(&self, part: usize, corners: Vec<WorldCorner>) -> PartCorners {
+        let Some(own) = self.boxes[part] else {
+            debug_assert!(corners.is_empty(), "a part's corners out of its bounds");
+            return PartCorners::default();
+        };
+        let (keys, points) = self.prepare(corners);
+        // (Widened: a point is kept with the others on any doubt.)
+        let reach = self.radius * 1.001 + 1e-9;
+        let others: Vec<(DVec3, DVec3)> = (self.boxes.iter().enumerate())
+            .filter_map(|(k, b)| b.filter(|_| k != part))
+            .filter(|&(lo, hi)| box_gap((lo, hi), own) <= 2.0 * reach)
+            .collect();
+        let near_other = |p: DVec3| others.iter().any(|&b| box_gap(b, (p, p)) <= reach);
+        let mut out = PartCorners::default();
+        for members in components(&points, self.radius) {
+            if members.iter().any(|&i| near_other(points[i].p)) {
+                out.shared.extend(members.iter().map(|&i| WorldCorner { p: DVec3::from_array(keys[i].map(f64::from_bits)), w: points[i].w }));
+            } else {
+                out.groups.extend(self.group(&members, &keys, &points));
+            }
+        }
+        out
+    }
+
+    /// All groups: those of every part (in any order) and those of the components they share.
+    pub fn finish(&self, parts: impl IntoIterator<Item = PartCorners>) -> Vec<DVec3> {
+        let (mut groups, mut shared) = (vec![], vec![]);
+        for p in parts {
+            groups.extend(p.groups);
+            shared.extend(p.shared);
+        }
+        let (keys, points) = self.prepare(shared);
+        for members in components(&points, self.radius) {
+            groups.extend(self.group(&members, &keys, &points));
+        }
+        // (The order of grouping all points at once: heaviest seed first, ties by position.)
+        groups.sort_unstable_by(|a, b| b.w.total_cmp(&a.w).then(a.key.cmp(&b.key)));
+        groups.into_iter().map(|g| g.at).collect()
+    }
+
+    /// Corner points snapped, in the order of their positions' keys (then weights), with
+    /// those keys, and relative to the origin.
+    fn prepare(&self, mut corners: Vec<WorldCorner>) -> (Vec<[u64; 3]>, Vec<project::CornerPoint>) {
+        for c in corners.iter_mut() {
+            c.p = snap(c.p, self.q);
+            c.w = (c.w * self.q).round() / self.q;
+        }
+        corners.sort_unstable_by(|a, b| bits_key(a.p).cmp(&bits_key(b.p)).then(a.w.total_cmp(&b.w)));
+        let keys = corners.iter().map(|c| bits_key(c.p)).collect();
+        (keys, corners.iter().map(|c| project::CornerPoint { p: c.p - self.origin, w: c.w }).collect())
+    }
+
+    /// The groups of the component `members` (in the order of `points`).
+    fn group(&self, members: &[usize], keys: &[[u64; 3]], points: &[project::CornerPoint]) -> Vec<CornerGroup> {
+        let set: Vec<project::CornerPoint> = members.iter().map(|&i| points[i]).collect();
+        let seeded = project::seeded_groups(&set, self.radius, MIN_CORNER_SUPPORT);
+        seeded.into_iter().map(|(s, at)| CornerGroup { at, w: set[s].w, key: keys[members[s]] }).collect()
+    }
+}
+
+/// The gap between two boxes (0 where they meet).
+fn box_gap(a: (DVec3, DVec3), b: (DVec3, DVec3)) -> f64 {
+    (a.0 - b.1).max(b.0 - a.1).max(DVec3::ZERO).length()
+}
+
+/// The sets of `points` linked by distances within `radius`, each in the points' order; the
+/// sets in the order of their first points.
+fn components(points: &[project::CornerPoint], radius: f64) -> Vec<Vec<usize>> {
+    let mut grid = crate::grid::HashGrid::new(radius);
+    let mut parent: Vec<usize> = (0..points.len()).collect();
+    fn root(parent: &mut [usize], mut a: usize) -> usize {
+        while parent[a] != a {
+            parent[a] = parent[parent[a]];
+            a = parent[a];
+        }
+        a
+    }
+    for (i, c) in points.iter().enumerate() {
+        grid.near(c.p, radius, |j: u32| {
+            if points[j as usize].p.distance(c.p) <= radius {
+                let (a, b) = (root(&mut parent, i), root(&mut parent, j as usize));
+                parent[a.max(b)] = a.min(b);
+            }
+        });
+        grid.insert(c.p, i as u32);
+    }
+    let mut at = vec![usize::MAX; points.len()];
+    let mut out: Vec<Vec<usize>> = vec![];
+    for i in 0..points.len() {
+        let r = root(&mut parent, i);
+        if at[r] == usize::MAX {
+            at[r] = out.len();
+            out.push(vec![]);
+        }
+        out[at[r]].push(i);
+    }
+    out
 }
 
 /// Largest distance from an edge point to the edge points that move it in stage 3: a block
@@ -391,6 +532,44 @@ impl Orientation {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn corners_grouped_a_part_at_a_time_are_those_grouped_at_once() {
+        let r = super::super::Params::default().resolve(0.01, 0.0);
+        let radius = r.corner_radius;
+        let world = DVec3::new(5e5, 5.4e6, 100.0);
+        let mut rng = crate::rng::Rng::new(7);
+        let mut all = vec![];
+        // Tight clusters, loose ones (two or three groups each), and chains a few parts long;
+        // weights from a few values, so that ties are broken by position.
+        for k in 0..400 {
+            let c = world + DVec3::new(rng.range(0.0, 16.0), rng.range(0.0, 3.0), rng.range(0.0, 1.5));
+            let (n, spread) = [(8, 0.3), (12, 1.5), (12, 0.0)][k % 3];
+            let dir = DVec3::new(1.0, rng.range(-0.3, 0.3), 0.0).normalize();
+            for i in 0..n {
+                let along = if spread == 0.0 { dir * (i as f64 * 0.8 * radius) } else { DVec3::ZERO };
+                let p = c + along + rng.in_ball(spread * radius);
+                all.push(WorldCorner { p, w: 1.0 + (rng.f64() * 4.0).floor() });
+            }
+        }
+        // Parts are slabs along x whose corner points stray a little past their borders.
+        let part_of = |c: &WorldCorner, jitter: f64| (((c.p.x - world.x + jitter) / 2.0).floor().clamp(0.0, 7.0)) as usize;
+        let mut parts: Vec<Vec<WorldCorner>> = vec![vec![]; 8];
+        for c in &all {
+            parts[part_of(c, rng.range(-0.05, 0.05))].push(*c);
+        }
+        let origin = world + DVec3::new(1.0, 0.5, 0.25);
+        let bounds: Vec<_> = parts.iter().map(|p| CornerGrouping::bounds(p, &r)).collect();
+        let grouping = CornerGrouping::new(&bounds, origin, &r);
+        let done: Vec<PartCorners> = parts.into_iter().enumerate().rev().map(|(k, p)| grouping.part(k, p)).collect();
+        let (alone, shared) = (done.iter().map(|p| p.groups.len()).sum::<usize>(), done.iter().map(|p| p.shared.len()).sum::<usize>());
+        let by_parts = grouping.finish(done);
+        let (_, points) = grouping.prepare(all.clone());
+        let at_once = project::group_corners(&points, radius, MIN_CORNER_SUPPORT);
+        assert!(at_once.len() > 300, "{} groups", at_once.len());
+        assert!(alone > 100 && shared > 100 && shared < all.len() / 2, "{alone} groups alone, {shared} corner points shared");
+        assert_eq!(by_parts, at_once);
+    }
 
     #[test]
     fn vertices_without_normals_take_the_nearest_along_the_curve() {

@@ -585,6 +585,12 @@ fn half_surfaces(a: &Surface, b: &Surface, x: DVec3, tol: f64) -> Option<Sides> 
 /// to the group's weighted mean (Daniels 2007). Groups with fewer than `min_support` members are
 /// dropped as accidental.
 pub fn group_corners(corners: &[CornerPoint], radius: f64, min_support: usize) -> Vec<DVec3> {
+    seeded_groups(corners, radius, min_support).into_iter().map(|(_, p)| p).collect()
+}
+
+/// [`group_corners`], each group with its seed: the heaviest member, which formed it (by its
+/// index in `corners`, whose order breaks ties of weight).
+pub fn seeded_groups(corners: &[CornerPoint], radius: f64, min_support: usize) -> Vec<(usize, DVec3)> {
     if corners.is_empty() {
         return vec![];
     }
@@ -617,7 +623,7 @@ pub fn group_corners(corners: &[CornerPoint], radius: f64, min_support: usize) -
         let sw: f64 = group.iter().map(|&b| corners[b].w).sum();
         let mean = group.iter().map(|&b| corners[b].p * corners[b].w).sum::<DVec3>() / sw;
         let rep = group.iter().copied().min_by(|&x, &y| corners[x].p.distance(mean).total_cmp(&corners[y].p.distance(mean))).unwrap();
-        out.push(corners[rep].p);
+        out.push((a, corners[rep].p));
     }
     out
 }

@@ -11,7 +11,7 @@ use crate::curves::{Curves, Outside, Polyline};
 use crate::error::{Error, Result};
 use crate::extract::blocks::{self, in_box, Blocks, Census, Layers};
 use crate::extract::complete::{self, Curve};
-use crate::extract::polylines::{self, Gathered, NearEdges, SmoothedEdges};
+use crate::extract::polylines::{self, CornerGrouping, Gathered, NearEdges, SmoothedEdges};
 use crate::extract::stitch::{self, PieceEnds, Plan};
 use crate::extract::{groups, Counts, Resolved, Timings, WorldEdge};
 use crate::keys::snap_quantum;
@@ -158,17 +158,18 @@ impl Run<'_> {
                 e.edges.iter().for_each(|x| layers.add(x.p - anchor));
                 let lo = e.edges.iter().map(|x| x.p).reduce(DVec3::min);
                 let hi = e.edges.iter().map(|x| x.p).reduce(DVec3::max);
-                Ok((t, e.candidates, e.one_surface, e.scattered, e.edges.len(), e.corners, layers, lo.zip(hi)))
+                let corners = (e.corners.len(), CornerGrouping::bounds(&e.corners, r));
+                Ok((t, e.candidates, e.one_surface, e.scattered, e.edges.len(), corners, layers, lo.zip(hi)))
             })
             .collect::<Result<Vec<_>>>()?;
-        let (mut boxes, mut corners, mut layers) = (vec![], vec![], Layers::new(cell, r.step));
-        for (t, candidates, one_surface, scattered, edges, c, l, bounds) in seen {
+        let (mut boxes, mut corner_boxes, mut layers) = (vec![], vec![], Layers::new(cell, r.step));
+        for (t, candidates, one_surface, scattered, edges, (corners, corner_box), l, bounds) in seen {
             counts.candidates += candidates;
             counts.one_surface += one_surface;
             counts.scattered += scattered;
             counts.edge_points += edges as u64;
-            counts.corner_points += c.len() as u64;
-            corners.extend(c);
+            counts.corner_points += corners as u64;
+            corner_boxes.push((t, corner_box));
             layers.merge(&l);
             if let Some((lo, hi)) = bounds {
                 boxes.push((t, lo, hi));
@@ -178,21 +179,27 @@ impl Run<'_> {
         for b in boxes.iter_mut() {
             (b.1, b.2) = (b.1 - origin, b.2 - origin);
         }
-        let census = boxes
+        // (The corner points are grouped a tile at a time, as the blocks are counted.)
+        let grouping = CornerGrouping::new(&corner_boxes.iter().map(|c| c.1).collect::<Vec<_>>(), origin, r);
+        let has_edges = |t: u32| boxes.binary_search_by_key(&t, |b| b.0).is_ok();
+        let read: Vec<(usize, u32)> = corner_boxes.iter().enumerate().filter(|(_, c)| c.1.is_some() || has_edges(c.0)).map(|(k, c)| (k, c.0)).collect();
+        let (census, parts) = read
             .par_iter()
-            .map(|&(t, _, _)| {
+            .map(|&(k, t)| {
+                let e = self.stored_edges(t, q)?;
                 let mut census = Census::new(side);
-                self.stored_edges(t, q)?.edges.iter().for_each(|x| census.add(x.p - origin));
-                Ok(census)
+                e.edges.iter().for_each(|x| census.add(x.p - origin));
+                Ok((census, vec![grouping.part(k, e.corners)]))
             })
             .try_reduce(
-                || Census::new(side),
+                || (Census::new(side), vec![]),
                 |mut a, b| {
-                    a.merge(b);
+                    a.0.merge(b.0);
+                    a.1.extend(b.1);
                     Ok(a)
                 },
             )?;
-        let grouped = polylines::group_corners(corners, origin, r);
+        let grouped = grouping.finish(parts);
         Ok(Survey { side, origin, counts, boxes, blocks: blocks::plan(&census), grouped })
     }
 
