@@ -11,7 +11,7 @@ use super::params::Resolved;
 use super::project::{self, WorldCorner, WorldEdge};
 use super::smooth;
 use crate::curves::{Polyline, Vertex};
-use crate::keys::{bits_key, snap, snap_quantum};
+use crate::keys::{bits_key, settle, snap, snap_quantum};
 use crate::spatial::Index;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -126,7 +126,7 @@ impl CornerGrouping {
     fn prepare(&self, mut corners: Vec<WorldCorner>) -> (Vec<[u64; 3]>, Vec<project::CornerPoint>) {
         for c in corners.iter_mut() {
             c.p = snap(c.p, self.q);
-            c.w = (c.w * self.q).round() / self.q;
+            c.w = settle(c.w);
         }
         corners.sort_unstable_by(|a, b| bits_key(a.p).cmp(&bits_key(b.p)).then(a.w.total_cmp(&b.w)));
         let keys = corners.iter().map(|c| bits_key(c.p)).collect();
