@@ -269,7 +269,7 @@ pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> 
         let ok = resolvable(&t, r * diag, origin);
         // (+ 0.0: an empty float sum is -0.0.)
         let length = |want: Option<f64>| {
-            t.samples.iter().zip(&ok).zip(&dt).filter(|((_, &o), &x)| o && want.is_none_or(|tol| x <= tol)).map(|((s, _), _)| s.1).sum::<f64>() + 0.0
+            t.samples.iter().zip(&ok).zip(&dt).filter(|&((_, &o), &x)| o && want.is_none_or(|tol| x <= tol)).map(|((s, _), _)| s.1).sum::<f64>() + 0.0
         };
         let share = length(None);
         s.resolvable = Some(Resolvable { separation: r, share: share / tl, recall: (share > 0.0).then(|| length(Some(tol)) / share) });
@@ -278,7 +278,7 @@ pub fn evaluate(truth: &[Polyline], curves: &[Polyline], opts: &EvalOptions) -> 
         return s;
     }
     let de = distances(&e, &t, origin);
-    let matched = |d: &Dense, dist: &[f64]| d.samples.iter().zip(dist).filter(|(_, &x)| x <= tol).map(|(s, _)| s.1).sum::<f64>();
+    let matched = |d: &Dense, dist: &[f64]| d.samples.iter().zip(dist).filter(|&(_, &x)| x <= tol).map(|(s, _)| s.1).sum::<f64>();
     let mean = |d: &Dense, dist: &[f64]| d.samples.iter().zip(dist).map(|(s, x)| s.1 * x).sum::<f64>() / total(d);
     let max = |dist: &[f64]| dist.iter().copied().fold(0.0, f64::max);
     s.recall = matched(&t, &dt) / tl;

@@ -89,10 +89,8 @@ impl CornerGrouping {
         let (keys, points) = self.prepare(corners);
         // (Widened: a point is kept with the others on any doubt.)
         let reach = self.radius * 1.001 + 1e-9;
-        let others: Vec<(DVec3, DVec3)> = (self.boxes.iter().enumerate())
-            .filter_map(|(k, b)| b.filter(|_| k != part))
-            .filter(|&(lo, hi)| box_gap((lo, hi), own) <= 2.0 * reach)
-            .collect();
+        let others: Vec<(DVec3, DVec3)> =
+            (self.boxes.iter().enumerate()).filter_map(|(k, b)| b.filter(|_| k != part)).filter(|&(lo, hi)| box_gap((lo, hi), own) <= 2.0 * reach).collect();
         let near_other = |p: DVec3| others.iter().any(|&b| box_gap(b, (p, p)) <= reach);
         let mut out = PartCorners::default();
         for members in components(&points, self.radius) {

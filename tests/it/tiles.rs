@@ -209,7 +209,7 @@ fn interrupt_then_rerun_and_status() {
     assert_eq!(v["finished"], true);
 }
 
-extern "C" {
+unsafe extern "C" {
     #[link_name = "kill"]
     fn libc_kill(pid: i32, sig: i32) -> i32;
 }
