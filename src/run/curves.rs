@@ -90,7 +90,7 @@ impl Run<'_> {
         // (Once planned, a piece is only its block and size: its ends are dropped.)
         let pieces: Vec<(u32, u32)> = ends.iter().map(|e| (e.block, e.len)).collect();
         drop(ends);
-        let mut store = PieceStore { run: self, pieces: &pieces, first: &first, merge, recent: Recent::new(self.opts.memory / 16 / 48) };
+        let mut store = PieceStore { run: self, pieces: &pieces, first: &first, merge, recent: Recent::new(self.opts.memory / 48 / 48) };
         if self.opts.debug.on() {
             let lines = store.lines(&plans.iter().collect::<Vec<_>>())?;
             let pl: Vec<Polyline> = lines.iter().enumerate().map(|(i, l)| Polyline::from_points(i as u32, l.iter().map(|p| *p + origin))).collect();
@@ -490,7 +490,8 @@ impl Run<'_> {
             }
         }
         let mut gathered: Vec<Gathered> = curves.iter().map(|c| Gathered::new(c.v.len())).collect();
-        let mut smoothed = Recent::new(self.opts.memory / 16 / 48);
+        // (Small: it only spares neighbouring blocks decoding the records around them again.)
+        let mut smoothed = Recent::new(self.opts.memory / 48 / 48);
         for (b, ids) in meets.into_iter().enumerate() {
             if ids.is_empty() {
                 continue;
