@@ -127,10 +127,24 @@ pub fn complete(mut curves: Vec<Curve>, corners: &[DVec3], p: &CompleteParams, c
     curves
 }
 
-fn in_cone(x: DVec3, t: DVec3, q: DVec3, cos: f64, near: f64) -> bool {
+fn in_cone(x: DVec3, t: DVec3, q: DVec3, cos: f64) -> bool {
     let d = q - x;
-    let l = d.length();
-    l <= near || d.dot(t) >= cos * l
+    d.dot(t) >= cos * d.length()
+}
+
+/// True if end `e` of curve `c` (at `x`, tangent `t`) reaches `q`: within its cone, or within
+/// `near` and not behind it (see [`behind`]).
+fn reaches(c: &Curve, e: usize, x: DVec3, t: DVec3, q: DVec3, cos: f64, near: f64) -> bool {
+    in_cone(x, t, q, cos) || q.distance(x) <= near && !behind(c, e, q)
+}
+
+/// True if `q` is nearer the other end of curve `c` than its end `e`. An end takes a corner or
+/// a vertex within a step even outside its cone (its tangent is unsure that close), but not
+/// one that is its curve's other end's: where a short curve starts at a corner, its far end
+/// is within a step of the same corner, and taking it made the curve a loop there and back.
+/// (A curve that overshot a corner still takes it: its other end is far.)
+fn behind(c: &Curve, e: usize, q: DVec3) -> bool {
+    c.v[c.end_index(1 - e)].distance_squared(q) < c.v[c.end_index(e)].distance_squared(q)
 }
 
 /// Connects ends to the corners of the projection stage.
@@ -153,7 +167,7 @@ fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
             let mut best: Option<(f64, usize)> = None;
             grid.near(x, look, |k| {
                 let d = corners[k].distance(x);
-                if d <= look && in_cone(x, t, corners[k], cos, p.step) && best.is_none_or(|b| (d, k) < b) {
+                if d <= look && reaches(c, e, x, t, corners[k], cos, p.step) && best.is_none_or(|b| (d, k) < b) {
                     best = Some((d, k));
                 }
             });
@@ -279,7 +293,7 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams, cancel: &crate
                     }
                     let q = c.v[vi];
                     let d = q.distance(x);
-                    if d > look || d == 0.0 || !in_cone(x, t, q, cos, p.step) {
+                    if d > look || d == 0.0 || !reaches(&curves[ci], e, x, t, q, cos, p.step) {
                         return;
                     }
                     if best.is_none_or(|b| (d, cj, vi) < b) {
@@ -651,6 +665,49 @@ mod tests {
         let before = curves.clone();
         resolve_free_ends(&mut curves, &p, &crate::cancel::Cancel::default());
         assert_eq!(curves, before);
+    }
+
+    /// Straight curves along `dirs` from 3 towards the origin, ending at `last` along each.
+    fn arms_towards_the_origin(dirs: &[DVec3], last: f64) -> Vec<Curve> {
+        let line = |dir: DVec3| {
+            let mut v: Vec<DVec3> = (1..=30).rev().map(|k| dir * (k as f64 * 0.1)).collect();
+            v.push(dir * last);
+            Curve::new(v, false)
+        };
+        dirs.iter().map(|&d| line(d)).collect()
+    }
+
+    #[test]
+    fn an_end_does_not_take_the_corner_its_curve_started_from() {
+        let p = CompleteParams { step: 0.1, reach: 4.0, aperture_deg: 45.0, min_steps: 3.0, smooth_passes: 0, corner_zone: 0.0 };
+        // Two arms ending a step short of a corner at the origin, and a short piece grown from
+        // the corner along y, its far end within a step of it.
+        let tip = DVec3::new(0.0, 0.08, 0.0);
+        let mut curves = arms_towards_the_origin(&[DVec3::X, DVec3::Z], 0.1);
+        curves.push(Curve::new(vec![DVec3::ZERO, tip], false));
+        let done = complete(curves, &[DVec3::ZERO], &p, &crate::cancel::Cancel::default());
+        // The piece's first end takes the corner; its far end, whose cone looks away from it,
+        // stays free (it once took the corner too: a loop there and back).
+        let piece = done.iter().find(|c| c.v.contains(&tip)).expect("the piece");
+        assert_eq!((piece.v.first(), piece.corner.first()), (Some(&DVec3::ZERO), Some(&true)), "{:?}", piece.v);
+        assert_eq!((piece.v.last(), piece.corner.last()), (Some(&tip), Some(&false)), "{:?}", piece.v);
+        assert!(done.iter().all(|c| c.closed || c.v[0] != c.v[c.v.len() - 1]), "{done:?}");
+        // The arms meet the piece there.
+        assert_eq!(done.iter().filter(|c| c.v.last() == Some(&DVec3::ZERO)).count(), 2, "{done:?}");
+    }
+
+    #[test]
+    fn an_end_that_overshot_a_corner_takes_it() {
+        let p = CompleteParams { step: 0.1, reach: 4.0, aperture_deg: 45.0, min_steps: 3.0, smooth_passes: 0, corner_zone: 0.0 };
+        // Three arms whose ends went half a step past the corner at the origin: it lies behind
+        // each end, nearer the end's neighbour than the end itself.
+        let mut curves = arms_towards_the_origin(&[DVec3::X, DVec3::Y, DVec3::Z], 0.03);
+        for c in curves.iter_mut() {
+            let past = c.v[c.v.len() - 1] * (-0.05 / 0.03);
+            c.push_end(1, past, false);
+        }
+        let done = complete(curves, &[DVec3::ZERO], &p, &crate::cancel::Cancel::default());
+        assert!(done.iter().all(|c| c.v.last() == Some(&DVec3::ZERO) && c.corner.last() == Some(&true)), "{done:?}");
     }
 
     #[test]
