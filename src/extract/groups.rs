@@ -15,14 +15,15 @@
 //! `groups_complete_as_the_whole_does` in [`super::complete`]).
 
 use crate::grid::HashGrid;
+use crate::sets::Sets;
 use glam::DVec3;
 
 /// Links lines into groups: first every open line's ends, then every line's vertices.
 pub struct Linker {
     radius: f64,
     ends: HashGrid<(u32, DVec3)>,
-    /// Union-find forest over the lines; a root is its set's smallest line.
-    parent: Vec<u32>,
+    /// The lines linked so far.
+    sets: Sets,
 }
 
 impl Linker {
@@ -35,7 +36,7 @@ impl Linker {
         for (line, p) in ends {
             grid.insert(p, (line, p));
         }
-        Linker { radius, ends: grid, parent: (0..count as u32).collect() }
+        Linker { radius, ends: grid, sets: Sets::new(count) }
     }
 
     /// The lines with an end within twice the reach of one of the vertices `v`.
@@ -56,39 +57,13 @@ impl Linker {
     /// Links `line` to `others` (see [`Linker::near`]).
     pub fn link(&mut self, line: u32, others: &[u32]) {
         for &other in others {
-            self.union(line, other);
+            self.sets.union(line, other);
         }
-    }
-
-    fn root(&mut self, mut a: u32) -> u32 {
-        while self.parent[a as usize] != a {
-            let up = self.parent[self.parent[a as usize] as usize];
-            self.parent[a as usize] = up;
-            a = up;
-        }
-        a
-    }
-
-    fn union(&mut self, a: u32, b: u32) {
-        let (a, b) = (self.root(a), self.root(b));
-        let (low, high) = (a.min(b), a.max(b));
-        self.parent[high as usize] = low;
     }
 
     /// The groups, each its lines in order, in the order of their first lines.
-    pub fn groups(mut self) -> Vec<Vec<u32>> {
-        let n = self.parent.len();
-        let mut at: Vec<u32> = vec![u32::MAX; n];
-        let mut out: Vec<Vec<u32>> = vec![];
-        for line in 0..n as u32 {
-            let r = self.root(line) as usize;
-            if at[r] == u32::MAX {
-                at[r] = out.len() as u32;
-                out.push(vec![]);
-            }
-            out[at[r] as usize].push(line);
-        }
-        out
+    pub fn groups(self) -> Vec<Vec<u32>> {
+        self.sets.sets()
     }
 }
 

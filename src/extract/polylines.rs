@@ -148,34 +148,16 @@ fn box_gap(a: (DVec3, DVec3), b: (DVec3, DVec3)) -> f64 {
 /// sets in the order of their first points.
 fn components(points: &[project::CornerPoint], radius: f64) -> Vec<Vec<usize>> {
     let mut grid = crate::grid::HashGrid::new(radius);
-    let mut parent: Vec<usize> = (0..points.len()).collect();
-    fn root(parent: &mut [usize], mut a: usize) -> usize {
-        while parent[a] != a {
-            parent[a] = parent[parent[a]];
-            a = parent[a];
-        }
-        a
-    }
+    let mut sets = crate::sets::Sets::new(points.len());
     for (i, c) in points.iter().enumerate() {
         grid.near(c.p, radius, |j: u32| {
             if points[j as usize].p.distance(c.p) <= radius {
-                let (a, b) = (root(&mut parent, i), root(&mut parent, j as usize));
-                parent[a.max(b)] = a.min(b);
+                sets.union(i as u32, j);
             }
         });
         grid.insert(c.p, i as u32);
     }
-    let mut at = vec![usize::MAX; points.len()];
-    let mut out: Vec<Vec<usize>> = vec![];
-    for i in 0..points.len() {
-        let r = root(&mut parent, i);
-        if at[r] == usize::MAX {
-            at[r] = out.len();
-            out.push(vec![]);
-        }
-        out[at[r]].push(i);
-    }
-    out
+    sets.sets().into_iter().map(|s| s.into_iter().map(|i| i as usize).collect()).collect()
 }
 
 /// Largest distance from an edge point to the edge points that move it in stage 3: a block
