@@ -20,10 +20,10 @@
 //!
 //! Shared mechanics, below all of those (each imports at most [`error`] and the ones listed
 //! before it): [`points`] (plain cloud data types), [`rng`] (the keyed random stream), `keys`
-//! (position keys, hashing, snapping), `grid` (cells of a uniform grid), `sets` (union-find), [`spatial`] (the k-d
-//! tree), [`spacing`], `codec` (the record format of a run directory), `workspace` (a run
-//! directory or memory), [`cancel`], [`progress`], [`mem`]; and [`debug`] (intermediate point
-//! sets, written with the [`curves`] writer).
+//! (position keys, hashing, snapping), `grid` (cells of a uniform grid), `sets` (union-find),
+//! [`spatial`] (the k-d tree), [`spacing`], `codec` (the record format of a run directory),
+//! `workspace` (a run directory or memory), [`cancel`], [`progress`], [`mem`]; and [`debug`]
+//! (intermediate point sets, written with the [`curves`] writer).
 #![warn(missing_docs)]
 
 pub mod cancel;
