@@ -56,10 +56,13 @@ pub struct Plan {
     pub closed: bool,
     /// True where the chain of pieces came round to its first and its two ends were merged.
     pub round: bool,
-    /// Its first and last vertex, for an open polyline (None for a closed one, and for the
-    /// rare chain that came round but is too short to stay closed: gather it to know them).
-    pub ends: Option<[DVec3; 2]>,
 }
+
+/// A stitched polyline's first and last vertex, for an open polyline (None for a closed one,
+/// and for the rare chain that came round but is too short to stay closed: gather it to know
+/// them). Kept apart from its [`Plan`]: only grouping needs them, and the curve stage drops
+/// them before completion.
+pub type PlanEnds = Option<[DVec3; 2]>;
 
 /// Joins `pieces` (each with the block it came from, in a fixed order) into polylines, in the
 /// order of their first piece. Crossings within `reach` of each other are paired; where two
@@ -80,23 +83,25 @@ pub struct Plan {
 /// ```
 pub fn stitch(pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
     let ends: Vec<PieceEnds> = pieces.iter().map(|(b, p)| PieceEnds::of(*b, p)).collect();
-    plan(&ends, reach, merge).iter().map(|l| (gather(l, |k| &pieces[k as usize].1.v, merge), l.closed)).collect()
+    plan(&ends, reach, merge).0.iter().map(|l| (gather(l, |k| &pieces[k as usize].1.v, merge), l.closed)).collect()
 }
 
 /// Plans the polylines that [`stitch`] makes of the pieces whose ends are `pieces`: which
-/// pieces each joins, which way, and where it ends. Only the pieces' ends decide it: pieces
-/// are joined at paired crossings, and only the end vertices of joined pieces are merged.
-pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> Vec<Plan> {
+/// pieces each joins and which way (the plans), and where each ends (their [`PlanEnds`], in
+/// the same order). Only the pieces' ends decide it: pieces are joined at paired crossings,
+/// and only the end vertices of joined pieces are merged.
+pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> (Vec<Plan>, Vec<PlanEnds>) {
     let links = pair_crossings(pieces, reach);
     let mut seen = vec![false; pieces.len()];
-    let mut out = vec![];
+    let (mut out, mut out_ends) = (vec![], vec![]);
     for p in 0..pieces.len() {
         if seen[p] {
             continue;
         }
         if pieces[p].closed {
             seen[p] = true;
-            out.push(Plan { parts: vec![(p as u32, false)], closed: true, round: false, ends: None });
+            out.push(Plan { parts: vec![(p as u32, false)], closed: true, round: false });
+            out_ends.push(None);
             continue;
         }
         let (first, mut enter, closed) = chain_start(&links, p);
@@ -137,10 +142,11 @@ pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> Vec<Plan> {
         count -= round as usize;
         if count >= 2 {
             let closed = closed && count > 2;
-            out.push(Plan { parts, closed, round, ends: (!closed && !round).then_some(ends) });
+            out.push(Plan { parts, closed, round });
+            out_ends.push((!closed && !round).then_some(ends));
         }
     }
-    out
+    (out, out_ends)
 }
 
 /// Where the chain of linked pieces through piece `p` starts: its first piece and the end it
@@ -327,8 +333,9 @@ mod tests {
             let whole = stitch_whole(&pieces, reach, merge);
             assert_eq!(stitch(pieces.clone(), reach, merge), whole, "round {round}");
             let ends: Vec<PieceEnds> = pieces.iter().map(|(b, p)| PieceEnds::of(*b, p)).collect();
-            for (plan, (v, _)) in plan(&ends, reach, merge).iter().zip(&whole) {
-                if let Some(e) = plan.ends {
+            let (plans, plan_ends) = plan(&ends, reach, merge);
+            for ((plan, plan_ends), (v, _)) in plans.iter().zip(plan_ends).zip(&whole) {
+                if let Some(e) = plan_ends {
                     assert_eq!(e, [v[0], v[v.len() - 1]], "round {round}");
                 }
                 merged += plan.parts.iter().map(|&(k, _)| ends[k as usize].len as usize).sum::<usize>() - v.len();

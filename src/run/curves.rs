@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::extract::blocks::{self, in_box, Blocks, Census, Layers};
 use crate::extract::complete::{self, Curve};
 use crate::extract::polylines::{self, CornerGrouping, Gathered, NearEdges, SmoothedEdges};
-use crate::extract::stitch::{self, PieceEnds, Plan};
+use crate::extract::stitch::{self, PieceEnds, Plan, PlanEnds};
 use crate::extract::{groups, Counts, Resolved, Timings, WorldEdge};
 use crate::keys::snap_quantum;
 use glam::DVec3;
@@ -85,7 +85,7 @@ impl Run<'_> {
             ..counts
         };
         let merge = stitch::MERGE_STEPS * r.step;
-        let plans = stitch::plan(&ends, stitch::JOIN_STEPS * r.step, merge);
+        let (plans, plan_ends) = stitch::plan(&ends, stitch::JOIN_STEPS * r.step, merge);
         counts.grown = plans.len() as u64;
         // (Once planned, a piece is only its block and size: its ends are dropped.)
         let pieces: Vec<(u32, u32)> = ends.iter().map(|e| (e.block, e.len)).collect();
@@ -98,7 +98,7 @@ impl Run<'_> {
             self.opts.debug.points("corners.obj", &grouped, origin);
         }
         let tc = Instant::now();
-        let batches = self.complete(&mut store, &plans, &grouped, &blocks, origin, r, outside, &mut counts)?;
+        let batches = self.complete(&mut store, &plans, plan_ends, &grouped, &blocks, origin, r, outside, &mut counts)?;
         drop(store);
         drop((plans, pieces));
         // (What the stage freed goes back to the system before the outputs are written.)
@@ -397,6 +397,7 @@ impl Run<'_> {
         &self,
         store: &mut PieceStore,
         plans: &[Plan],
+        plan_ends: Vec<PlanEnds>,
         grouped: &[DVec3],
         blocks: &Blocks,
         origin: DVec3,
@@ -408,7 +409,7 @@ impl Run<'_> {
         let reach = cp.reach * cp.step;
         // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
         let budget = (self.opts.memory / 16 / 140).max(256) as usize;
-        let all = self.groups(store, plans, reach, budget)?;
+        let all = self.groups(store, plans, plan_ends, reach, budget)?;
         let corners = groups::Corners::new(grouped, reach);
         let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
         let (mut traced, mut written) = (0, 0);
@@ -449,12 +450,13 @@ impl Run<'_> {
     }
 
     /// The groups of the polylines `plans` that completion can complete apart (see
-    /// [`groups`]): each open polyline's ends, then every polyline's vertices, gathered in
-    /// batches of about `budget` vertices, linked to the ends near them.
-    fn groups(&self, store: &mut PieceStore, plans: &[Plan], reach: f64, budget: usize) -> Result<Vec<Vec<u32>>> {
+    /// [`groups`]): each open polyline's ends (from `plan_ends`, dropped once indexed), then
+    /// every polyline's vertices, gathered in batches of about `budget` vertices, linked to the
+    /// ends near them.
+    fn groups(&self, store: &mut PieceStore, plans: &[Plan], plan_ends: Vec<PlanEnds>, reach: f64, budget: usize) -> Result<Vec<Vec<u32>>> {
         let mut ends = vec![];
-        for (i, p) in plans.iter().enumerate().filter(|(_, p)| !p.closed) {
-            let [a, b] = match p.ends {
+        for (i, (p, e)) in plans.iter().zip(plan_ends).enumerate().filter(|(_, (p, _))| !p.closed) {
+            let [a, b] = match e {
                 Some(e) => e,
                 None => {
                     let v = store.lines(&[p])?.remove(0);
