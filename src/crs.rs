@@ -318,12 +318,11 @@ fn epsg_of(n: &Node) -> Option<u32> {
     let compound = COMPOUND.iter().any(|k| n.keyword.eq_ignore_ascii_case(k));
     // (A compound CRS's own code names the pair; the horizontal part's is what GIS tools place
     // the curves by, so it is preferred.)
-    if compound {
-        if let Some(h) =
+    if compound
+        && let Some(h) =
             n.children().find(|c| !VERTICAL.iter().any(|k| c.keyword.eq_ignore_ascii_case(k)) && !AUTHORITY.iter().any(|k| c.keyword.eq_ignore_ascii_case(k)))
-        {
-            return epsg_of(h).or(own);
-        }
+    {
+        return epsg_of(h).or(own);
     }
     own
 }

@@ -102,10 +102,10 @@ struct ParamArgs {
 impl ParamArgs {
     fn params(&self) -> Result<crease::extract::Params, Error> {
         for (name, v) in [("kappa", self.kappa), ("fit-radius", self.fit_radius), ("rmls-radius", self.rmls_radius), ("step", self.step)] {
-            if let Some(v) = v {
-                if !(v > 0.0 && v.is_finite()) {
-                    return Err(Error::Usage(format!("--{name} must be a positive number")));
-                }
+            if let Some(v) = v
+                && !(v > 0.0 && v.is_finite())
+            {
+                return Err(Error::Usage(format!("--{name} must be a positive number")));
             }
         }
         Ok(crease::extract::Params {
@@ -598,10 +598,10 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
             "-o -: crease writes a run directory of several files, not a stream; name a directory (use --json for a summary on stdout)".into(),
         ));
     }
-    if let Some(t) = tile_size {
-        if !(t > 0.0 && t.is_finite()) {
-            return Err(Error::Usage("--tile-size must be a positive number".into()));
-        }
+    if let Some(t) = tile_size
+        && !(t > 0.0 && t.is_finite())
+    {
+        return Err(Error::Usage("--tile-size must be a positive number".into()));
     }
     let cancel = crease::cancel::Cancel::default();
     let _ = ctrlc::set_handler({

@@ -214,11 +214,11 @@ impl<'a> Store<'a> {
                 *x = m.f64()?;
             }
             let chunk = Bounds { min: [v[0], v[1], v[2]], max: [v[3], v[4], v[5]] };
-            if let Some((b, d)) = near {
-                if (0..3).any(|a| chunk.min[a] > b.max[a] + d || chunk.max[a] < b.min[a] - d) {
-                    f.skip(h.zstd_len).map_err(truncated)?;
-                    continue;
-                }
+            if let Some((b, d)) = near
+                && (0..3).any(|a| chunk.min[a] > b.max[a] + d || chunk.max[a] < b.min[a] - d)
+            {
+                f.skip(h.zstd_len).map_err(truncated)?;
+                continue;
             }
             z.resize(h.zstd_len, 0);
             f.read_exact(&mut z).map_err(truncated)?;

@@ -61,10 +61,10 @@ struct VertexTable {
 impl VertexTable {
     /// The number of vertex `v`, and true if it is new (to be written).
     fn number(&mut self, v: &Vertex) -> (usize, bool) {
-        if v.corner {
-            if let Some(&i) = self.corners.get(&v.p.to_array().map(f64::to_bits)) {
-                return (i, false);
-            }
+        if v.corner
+            && let Some(&i) = self.corners.get(&v.p.to_array().map(f64::to_bits))
+        {
+            return (i, false);
         }
         self.next += 1;
         if v.corner {

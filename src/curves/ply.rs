@@ -129,10 +129,10 @@ pub fn read_ply(path: &Path) -> Result<Vec<Polyline>> {
     for e in 0..ne {
         let a = i32_at(eb + e * 8) as usize;
         let b = i32_at(eb + e * 8 + 4) as usize;
-        if b < a {
-            if let Ok(k) = first_vertex.binary_search(&b) {
-                curves[k].closed = true;
-            }
+        if b < a
+            && let Ok(k) = first_vertex.binary_search(&b)
+        {
+            curves[k].closed = true;
         }
     }
     Ok(curves)

@@ -293,12 +293,11 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
         return out;
     }
     out.edge = Some(EdgePoint { p: e, n: wedge.normals() });
-    if surfaces.len() >= 3 {
-        if let Some(c) = project_to_corner(x, [&surfaces[0].quad, &surfaces[1].quad, &surfaces[2].quad], tol) {
-            if c.distance(x) <= reach {
-                out.corner = Some(CornerPoint { p: c, w: 1.0 / c.distance(e).max(1e-9 * p.radius) });
-            }
-        }
+    if surfaces.len() >= 3
+        && let Some(c) = project_to_corner(x, [&surfaces[0].quad, &surfaces[1].quad, &surfaces[2].quad], tol)
+        && c.distance(x) <= reach
+    {
+        out.corner = Some(CornerPoint { p: c, w: 1.0 / c.distance(e).max(1e-9 * p.radius) });
     }
     out
 }
@@ -418,16 +417,16 @@ fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f
     // order, as `rms(&plane)`.)
     let (curved, plane_rss) = Quadric::fit_over_plane(plane.frame, members.iter().map(|&j| (pts[j], 1.0)), 1e-3);
     let rp = (plane_rss / members.len() as f64).sqrt();
-    if rp > 0.2 * min_threshold {
-        if let Some(q) = curved {
-            let rq = rms(&q);
-            let n = members.len() as f64;
-            if (rp * rp - rq * rq) * (n - 6.0) > CURVATURE_F * 3.0 * rq * rq {
-                if let Some(side) = crease_split(pts, members, &q, rq * rq * n) {
-                    return fit_surface(pts, &side, orient, min_threshold);
-                }
-                return Some((q, rq));
+    if rp > 0.2 * min_threshold
+        && let Some(q) = curved
+    {
+        let rq = rms(&q);
+        let n = members.len() as f64;
+        if (rp * rp - rq * rq) * (n - 6.0) > CURVATURE_F * 3.0 * rq * rq {
+            if let Some(side) = crease_split(pts, members, &q, rq * rq * n) {
+                return fit_surface(pts, &side, orient, min_threshold);
             }
+            return Some((q, rq));
         }
     }
     Some((plane, rp))

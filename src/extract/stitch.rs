@@ -183,13 +183,13 @@ pub fn gather<'a>(plan: &Plan, piece: impl Fn(u32) -> &'a [DVec3], merge: f64) -
 
 /// Appends `part` to `v`, its first vertex merged with `v`'s last where they lie within `merge`.
 fn join(v: &mut Vec<DVec3>, mut part: impl Iterator<Item = DVec3>, merge: f64) {
-    if let Some(last) = v.last_mut() {
-        if let Some(first) = part.next() {
-            if last.distance(first) < merge {
-                *last = last.lerp(first, 0.5);
-            } else {
-                v.push(first);
-            }
+    if let Some(last) = v.last_mut()
+        && let Some(first) = part.next()
+    {
+        if last.distance(first) < merge {
+            *last = last.lerp(first, 0.5);
+        } else {
+            v.push(first);
         }
     }
     v.extend(part);

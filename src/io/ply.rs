@@ -216,16 +216,16 @@ impl PlyReader {
         for e in &elements[..vi] {
             pos = skip_element(path, &map, enc, e, pos)?;
         }
-        if enc != Encoding::Ascii {
-            if let Some(sz) = vertex.fixed_size() {
-                // (A count near 2^64 times the record size overflows.)
-                let need = vertex.count.checked_mul(sz as u64).and_then(|n| n.checked_add(pos as u64));
-                if need.is_none_or(|n| n > map.len() as u64) {
-                    return Err(bad(
-                        path,
-                        format!("header declares {} vertices but the file holds only {} (truncated)", vertex.count, (map.len() - pos.min(map.len())) / sz),
-                    ));
-                }
+        if enc != Encoding::Ascii
+            && let Some(sz) = vertex.fixed_size()
+        {
+            // (A count near 2^64 times the record size overflows.)
+            let need = vertex.count.checked_mul(sz as u64).and_then(|n| n.checked_add(pos as u64));
+            if need.is_none_or(|n| n > map.len() as u64) {
+                return Err(bad(
+                    path,
+                    format!("header declares {} vertices but the file holds only {} (truncated)", vertex.count, (map.len() - pos.min(map.len())) / sz),
+                ));
             }
         }
         let header = CloudHeader {

@@ -127,10 +127,10 @@ impl Run<'_> {
     fn survey(&self, r: &Resolved) -> Result<Survey> {
         let side = self.opts.block_steps * r.step;
         // (A damaged survey, or one of blocks of another side, is made again.)
-        if let Ok(kept) = records::read::<Survey>(&self.ws, 0) {
-            if kept.side == side {
-                return Ok(kept);
-            }
+        if let Ok(kept) = records::read::<Survey>(&self.ws, 0)
+            && kept.side == side
+        {
+            return Ok(kept);
         }
         let survey = self.survey_edges(r, side)?;
         if Worker::leads(self.worker) {
