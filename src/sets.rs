@@ -14,7 +14,7 @@ impl Sets {
     }
 
     /// The root of `a`'s set (the path is halved on the way).
-    pub fn root(&mut self, mut a: u32) -> u32 {
+    fn root(&mut self, mut a: u32) -> u32 {
         while self.parent[a as usize] != a {
             let up = self.parent[self.parent[a as usize] as usize];
             self.parent[a as usize] = up;
