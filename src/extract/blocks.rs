@@ -242,6 +242,33 @@ impl Blocks {
         out
     }
 
+    /// The blocks in slabs, one layer of base cells each, across the axis along which they
+    /// spread over the most base cells (the first of equals): the axis, and the slabs in order
+    /// along it, each its blocks in order.
+    ///
+    /// ```
+    /// use crease::extract::blocks::{plan, Census};
+    /// use glam::DVec3;
+    ///
+    /// let mut census = Census::new(1.0);
+    /// for (y, z) in [(0.5, 0.5), (0.5, 1.5), (3.5, 0.5)] {
+    ///     census.add(DVec3::new(0.5, y, z));
+    /// }
+    /// let (axis, slabs) = plan(&census).slabs();
+    /// assert_eq!(axis, 1);
+    /// assert_eq!(slabs, vec![vec![0, 1], vec![2]]);
+    /// ```
+    pub fn slabs(&self) -> (usize, Vec<Vec<u32>>) {
+        let layer = |b: &Block, k: usize| b.cells[0][k].div_euclid(1 << MAX_SPLITS);
+        let spread = |k: usize| self.list.iter().map(|b| layer(b, k)).collect::<std::collections::BTreeSet<_>>().len();
+        let axis = (0..3).max_by_key(|&k| (spread(k), std::cmp::Reverse(k))).unwrap_or(0);
+        let mut slabs: BTreeMap<i64, Vec<u32>> = BTreeMap::new();
+        for (k, b) in self.list.iter().enumerate() {
+            slabs.entry(layer(b, axis)).or_default().push(k as u32);
+        }
+        (axis, slabs.into_values().collect())
+    }
+
     /// The block whose core holds `p`, else the first whose box grown by `m` holds it. (Smoothed
     /// edge points, and polylines through them, may lie a little outside every block's core,
     /// at the edge cloud's fringes.)

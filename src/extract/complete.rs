@@ -762,13 +762,7 @@ mod tests {
         for seed in 1..=4 {
             let (lines, corners) = scattered_lines(seed);
             let whole = complete(lines.clone(), &corners, &p, &crate::cancel::Cancel::default());
-            let ends = lines.iter().enumerate().filter(|(_, c)| !c.closed).flat_map(|(i, c)| [(i as u32, c.v[0]), (i as u32, c.v[c.v.len() - 1])]);
-            let mut linker = super::super::groups::Linker::new(lines.len(), ends, reach);
-            for (i, c) in lines.iter().enumerate() {
-                let near = linker.near(&c.v);
-                linker.link(i as u32, &near);
-            }
-            let groups = linker.groups();
+            let groups = super::super::groups::groups(&lines.iter().map(|c| (c.v.clone(), c.closed)).collect::<Vec<_>>(), reach);
             let near = super::super::groups::Corners::new(&corners, reach);
             let mut parts = vec![];
             for g in &groups {

@@ -18,53 +18,29 @@ use crate::grid::HashGrid;
 use crate::sets::Sets;
 use glam::DVec3;
 
-/// Links lines into groups: first every open line's ends, then every line's vertices.
-pub struct Linker {
-    radius: f64,
-    ends: HashGrid<(u32, DVec3)>,
-    /// The lines linked so far.
-    sets: Sets,
-}
-
-impl Linker {
-    /// A linker for `count` lines, of which those in `ends` (line, end position) are open,
-    /// for completion that looks `reach` ahead.
-    pub fn new(count: usize, ends: impl IntoIterator<Item = (u32, DVec3)>, reach: f64) -> Linker {
-        // (The margin covers the rounding of distances summed along two reaches.)
-        let radius = 2.0 * reach * (1.0 + 1e-9);
-        let mut grid = HashGrid::new(radius);
-        for (line, p) in ends {
-            grid.insert(p, (line, p));
+/// The groups of `lines` (each its vertices, and true if closed) for completion that looks
+/// `reach` ahead: each group its lines in order, the groups in the order of their first lines.
+pub fn groups(lines: &[(Vec<DVec3>, bool)], reach: f64) -> Vec<Vec<u32>> {
+    // (The margin covers the rounding of distances summed along two reaches.)
+    let radius = 2.0 * reach * (1.0 + 1e-9);
+    let mut ends = HashGrid::new(radius);
+    for (i, (v, closed)) in lines.iter().enumerate() {
+        if !closed && !v.is_empty() {
+            ends.insert(v[0], (i as u32, v[0]));
+            ends.insert(v[v.len() - 1], (i as u32, v[v.len() - 1]));
         }
-        Linker { radius, ends: grid, sets: Sets::new(count) }
     }
-
-    /// The lines with an end within twice the reach of one of the vertices `v`.
-    pub fn near(&self, v: &[DVec3]) -> Vec<u32> {
-        let mut near = vec![];
+    let mut sets = Sets::new(lines.len());
+    for (i, (v, _)) in lines.iter().enumerate() {
         for &p in v {
-            self.ends.near(p, self.radius, |(other, q)| {
-                if q.distance(p) <= self.radius {
-                    near.push(other);
+            ends.near(p, radius, |(other, q)| {
+                if q.distance(p) <= radius {
+                    sets.union(i as u32, other);
                 }
             });
         }
-        near.sort_unstable();
-        near.dedup();
-        near
     }
-
-    /// Links `line` to `others` (see [`Linker::near`]).
-    pub fn link(&mut self, line: u32, others: &[u32]) {
-        for &other in others {
-            self.sets.union(line, other);
-        }
-    }
-
-    /// The groups, each its lines in order, in the order of their first lines.
-    pub fn groups(self) -> Vec<Vec<u32>> {
-        self.sets.sets()
-    }
+    sets.sets()
 }
 
 /// The corners of the projection stage, indexed, for handing each group those within the
@@ -111,12 +87,7 @@ mod tests {
         // Line 0 ends at 0 and 1; line 1 passes 1.9 from line 0's end (linked at reach 1);
         // line 2 lies 2.5 from every end; line 3 is closed, its vertex 0.5 from line 2's end.
         let lines = [vec![x(0.0), x(1.0)], vec![x(2.9), x(3.0)], vec![x(6.0), x(7.0)], vec![x(7.5), x(8.0), x(7.7)]];
-        let ends = [(0, x(0.0)), (0, x(1.0)), (1, x(2.9)), (1, x(3.0)), (2, x(6.0)), (2, x(7.0))];
-        let mut l = Linker::new(lines.len(), ends, 1.0);
-        for (i, v) in lines.iter().enumerate() {
-            let near = l.near(v);
-            l.link(i as u32, &near);
-        }
-        assert_eq!(l.groups(), vec![vec![0, 1], vec![2, 3]]);
+        let lines: Vec<(Vec<DVec3>, bool)> = lines.into_iter().enumerate().map(|(i, v)| (v, i == 3)).collect();
+        assert_eq!(groups(&lines, 1.0), vec![vec![0, 1], vec![2, 3]]);
     }
 }

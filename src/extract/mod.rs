@@ -28,6 +28,7 @@ pub mod project;
 pub mod smooth;
 pub mod statistics;
 pub mod stitch;
+pub mod sweep;
 
 pub use params::{Params, Resolved};
 pub use project::{TileEdges, WorldCorner, WorldEdge};

@@ -58,17 +58,10 @@ pub struct Plan {
     pub round: bool,
 }
 
-/// A stitched polyline's first and last vertex, for an open polyline (None for a closed one,
-/// and for the rare chain that came round but is too short to stay closed: gather it to know
-/// them). Kept apart from its [`Plan`]: only grouping needs them, and the curve stage drops
-/// them before completion.
-pub type PlanEnds = Option<[DVec3; 2]>;
-
 /// Joins `pieces` (each with the block it came from, in a fixed order) into polylines, in the
 /// order of their first piece. Crossings within `reach` of each other are paired; where two
-/// joined vertices lie within `merge`, they become one at their midpoint. (In memory: the
-/// curve stage instead plans the polylines from the pieces' ends and gathers each one's
-/// vertices when it needs them.)
+/// joined vertices lie within `merge`, they become one at their midpoint. (The curve stage
+/// stitches a cluster of pieces at a time, see [`super::sweep`].)
 ///
 /// ```
 /// use crease::extract::blocks::Piece;
@@ -83,17 +76,16 @@ pub type PlanEnds = Option<[DVec3; 2]>;
 /// ```
 pub fn stitch(pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
     let ends: Vec<PieceEnds> = pieces.iter().map(|(b, p)| PieceEnds::of(*b, p)).collect();
-    plan(&ends, reach, merge).0.iter().map(|l| (gather(l, |k| &pieces[k as usize].1.v, merge), l.closed)).collect()
+    plan(&ends, reach, merge).iter().map(|l| (gather(l, |k| &pieces[k as usize].1.v, merge), l.closed)).collect()
 }
 
 /// Plans the polylines that [`stitch`] makes of the pieces whose ends are `pieces`: which
-/// pieces each joins and which way (the plans), and where each ends (their [`PlanEnds`], in
-/// the same order). Only the pieces' ends decide it: pieces are joined at paired crossings,
-/// and only the end vertices of joined pieces are merged.
-pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> (Vec<Plan>, Vec<PlanEnds>) {
+/// pieces each joins and which way. Only the pieces' ends decide it: pieces are joined at
+/// paired crossings, and only the end vertices of joined pieces are merged.
+pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> Vec<Plan> {
     let links = pair_crossings(pieces, reach);
     let mut seen = vec![false; pieces.len()];
-    let (mut out, mut out_ends) = (vec![], vec![]);
+    let mut out = vec![];
     for p in 0..pieces.len() {
         if seen[p] {
             continue;
@@ -101,7 +93,6 @@ pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> (Vec<Plan>, Vec<Pla
         if pieces[p].closed {
             seen[p] = true;
             out.push(Plan { parts: vec![(p as u32, false)], closed: true, round: false });
-            out_ends.push(None);
             continue;
         }
         let (first, mut enter, closed) = chain_start(&links, p);
@@ -143,10 +134,9 @@ pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> (Vec<Plan>, Vec<Pla
         if count >= 2 {
             let closed = closed && count > 2;
             out.push(Plan { parts, closed, round });
-            out_ends.push((!closed && !round).then_some(ends));
         }
     }
-    (out, out_ends)
+    out
 }
 
 /// Where the chain of linked pieces through piece `p` starts: its first piece and the end it
@@ -333,11 +323,7 @@ mod tests {
             let whole = stitch_whole(&pieces, reach, merge);
             assert_eq!(stitch(pieces.clone(), reach, merge), whole, "round {round}");
             let ends: Vec<PieceEnds> = pieces.iter().map(|(b, p)| PieceEnds::of(*b, p)).collect();
-            let (plans, plan_ends) = plan(&ends, reach, merge);
-            for ((plan, plan_ends), (v, _)) in plans.iter().zip(plan_ends).zip(&whole) {
-                if let Some(e) = plan_ends {
-                    assert_eq!(e, [v[0], v[v.len() - 1]], "round {round}");
-                }
+            for (plan, (v, _)) in plan(&ends, reach, merge).iter().zip(&whole) {
                 merged += plan.parts.iter().map(|&(k, _)| ends[k as usize].len as usize).sum::<usize>() - v.len();
                 closed += plan.closed as usize;
             }

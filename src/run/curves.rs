@@ -1,9 +1,9 @@
-//! The curve stage (stages 3-5) over the edge points of every tile, in memory that grows with
-//! the number of polylines, not with the edge points or the polylines' vertices: the edge
-//! cloud is taken a growth block at a time (see [`crate::extract::blocks`]); the stitched
-//! polylines are planned from their pieces' ends and gathered from the blocks' records when
-//! needed; completion takes a batch of groups of them at a time (see [`groups`]), and the
-//! finished curves go to the working data batch by batch, for the writers to read back.
+//! The curve stage (stages 3-5) over the edge points of every tile, by region: the edge cloud
+//! is taken a growth block at a time (see [`crate::extract::blocks`]); the blocks' pieces a
+//! slab of blocks at a time, handed on in clusters that can be stitched and completed alone
+//! (see [`crate::extract::sweep`]); completion takes a batch of groups of lines at a time (see
+//! [`groups`]), and the finished curves go to the working data batch by batch, for the writers
+//! to read back. What it holds whole is the survey: the blocks and the grouped corners.
 
 use super::records::{self, Finished, Pieces, Record, Smoothed};
 use super::{Run, Worker};
@@ -12,7 +12,8 @@ use crate::error::{Error, Result};
 use crate::extract::blocks::{self, in_box, Blocks, Census, Layers};
 use crate::extract::complete::{self, Curve};
 use crate::extract::polylines::{self, CornerGrouping, Gathered, NearEdges, SmoothedEdges};
-use crate::extract::stitch::{self, PieceEnds, Plan, PlanEnds};
+use crate::extract::stitch;
+use crate::extract::sweep::{Held, Sweep};
 use crate::extract::{groups, Counts, Resolved, Timings, WorldEdge};
 use crate::keys::snap_quantum;
 use glam::DVec3;
@@ -22,16 +23,6 @@ use std::time::Instant;
 /// A tile's edge points at a glance: its number and the bounds of its edge points (relative to
 /// the origin).
 type TileBox = (u32, DVec3, DVec3);
-
-/// What the stitcher is given of every block's pieces.
-struct Grown {
-    /// The ends of every piece, numbered in block order.
-    ends: Vec<PieceEnds>,
-    /// Each block's first piece's number.
-    first: Vec<u32>,
-    /// The edge points the consensus filter dropped in all.
-    unconfirmed: u64,
-}
 
 /// What the survey of the edge points found (see [`Run::survey`]).
 pub(super) struct Survey {
@@ -55,7 +46,8 @@ impl Run<'_> {
     /// 2. per block: smoothing and the consensus filter (stage 3), then growing (stage 4) from
     ///    the block's core, cut at its border; each block's pieces are kept in the working data
     ///    (a worker grows its share of the blocks);
-    /// 3. the stitcher joins the pieces across the borders;
+    /// 3. a slab of blocks at a time, the stitcher joins the pieces across the borders, a
+    ///    cluster of them at a time;
     /// 4. completion (stage 5) on the stitched polylines, a group of them at a time;
     /// 5. per block again: the curves' normals and evidence from the smoothed edge points, a
     ///    batch of groups at a time.
@@ -74,33 +66,22 @@ impl Run<'_> {
             self.waiting = Some("the curves and outputs (worker 0 writes them)".into());
             return Ok(None);
         }
-        let Some(Grown { ends, first, unconfirmed }) = self.all_pieces(&survey)? else { return Ok(None) };
+        if !self.all_grown(&survey) {
+            return Ok(None);
+        }
         let Survey { counts, blocks, grouped, origin, .. } = survey;
         let mut counts = Counts {
             points: self.manifest.tile_points.iter().sum(),
             evaluated: self.evaluated,
             corners: grouped.len() as u64,
             blocks: blocks.list.len() as u64,
-            unconfirmed,
             ..counts
         };
-        let merge = stitch::MERGE_STEPS * r.step;
-        let (plans, plan_ends) = stitch::plan(&ends, stitch::JOIN_STEPS * r.step, merge);
-        counts.grown = plans.len() as u64;
-        // (Once planned, a piece is only its block and size: its ends are dropped.)
-        let pieces: Vec<(u32, u32)> = ends.iter().map(|e| (e.block, e.len)).collect();
-        drop(ends);
-        let mut store = PieceStore { run: self, pieces: &pieces, first: &first, merge, recent: Recent::new(self.opts.memory / 48 / 48) };
         if self.opts.debug.on() {
-            let lines = store.lines(&plans.iter().collect::<Vec<_>>())?;
-            let pl: Vec<Polyline> = lines.iter().enumerate().map(|(i, l)| Polyline::from_points(i as u32, l.iter().map(|p| *p + origin))).collect();
-            self.opts.debug.polylines("grown.obj", &pl);
             self.opts.debug.points("corners.obj", &grouped, origin);
         }
         let tc = Instant::now();
-        let batches = self.complete(&mut store, &plans, plan_ends, &grouped, &blocks, origin, r, outside, &mut counts)?;
-        drop(store);
-        drop((plans, pieces));
+        let batches = self.complete(&grouped, &blocks, origin, r, outside, &mut counts)?;
         // (What the stage freed goes back to the system before the outputs are written.)
         crate::mem::release_free_memory();
         seconds.completion = tc.elapsed().as_secs_f64();
@@ -250,34 +231,26 @@ impl Run<'_> {
         Ok(todo)
     }
 
-    /// The ends of every block's pieces, in block order, and the edge points the consensus
-    /// filter dropped in all; None (noting what it waits for) while some block is not grown yet
-    /// (another worker's share). The pieces' vertices stay in their records until gathered.
-    fn all_pieces(&mut self, survey: &Survey) -> Result<Option<Grown>> {
+    /// True once every block is grown; else false, noting what it waits for (another worker's
+    /// share).
+    fn all_grown(&mut self, survey: &Survey) -> bool {
         let n = survey.blocks.list.len() as u32;
         let done = (0..n).filter(|&b| self.ws.exists(&records::name(Pieces::DIR, b))).count();
         if done < n as usize {
             self.waiting = Some(format!("curves: {done} of {n} blocks grown (the other workers' share)"));
-            return Ok(None);
         }
-        let kept = (0..n)
-            .into_par_iter()
-            .map(|b| {
-                let k = records::read::<Pieces>(&self.ws, b)?;
-                if !k.grown_for(&survey.blocks.list[b as usize], survey.origin) {
-                    let why = "grown for other blocks than this run's (by a worker given another --block-steps?)";
-                    return Err(Error::damaged(self.ws.path(&records::name(Pieces::DIR, b)), why));
-                }
-                Ok((k.unconfirmed, k.pieces.iter().map(|p| PieceEnds::of(b, p)).collect::<Vec<_>>()))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let mut grown = Grown { ends: vec![], first: vec![], unconfirmed: 0 };
-        for (unconfirmed, ends) in kept {
-            grown.first.push(grown.ends.len() as u32);
-            grown.unconfirmed += unconfirmed;
-            grown.ends.extend(ends);
+        done == n as usize
+    }
+
+    /// Block `b`'s pieces, and the edge points the consensus filter dropped in it, as grown for
+    /// the blocks of this run.
+    fn block_pieces(&self, blocks: &Blocks, origin: DVec3, b: u32) -> Result<(Vec<blocks::Piece>, u64)> {
+        let k = records::read::<Pieces>(&self.ws, b)?;
+        if !k.grown_for(&blocks.list[b as usize], origin) {
+            let why = "grown for other blocks than this run's (by a worker given another --block-steps?)";
+            return Err(Error::damaged(self.ws.path(&records::name(Pieces::DIR, b)), why));
         }
-        Ok(Some(grown))
+        Ok((k.pieces, k.unconfirmed))
     }
 
     /// Stages 3 and 4 for this process's share of the blocks, those not done yet, a block at a
@@ -385,95 +358,116 @@ impl Run<'_> {
         Ok(())
     }
 
-    /// Stage 5 on the stitched polylines `plans`, a group at a time (see [`groups`]), each
-    /// batch of groups' curves then attributed (see [`Run::attribute`]), labelled convex or
-    /// concave as seen from `outside`, and those the output filters keep written to the
-    /// working data as a [`Finished`] record: a batch's polylines are gathered from the pieces,
-    /// completed, attributed and written, and only then the next. The curves come in the order
-    /// of their groups' first polylines. Returns the number of batches written; `counts`
-    /// gets the curves kept and left out.
-    #[allow(clippy::too_many_arguments)]
-    fn complete(
-        &self,
-        store: &mut PieceStore,
-        plans: &[Plan],
-        plan_ends: Vec<PlanEnds>,
-        grouped: &[DVec3],
-        blocks: &Blocks,
-        origin: DVec3,
-        r: &Resolved,
-        outside: &Outside,
-        counts: &mut Counts,
-    ) -> Result<u32> {
+    /// The stitcher and stage 5, by region, then each batch of curves attributed (see
+    /// [`Run::attribute`]), labelled convex or concave as seen from `outside`, and those the
+    /// output filters keep written to the working data as a [`Finished`] record. The blocks'
+    /// pieces are read a slab at a time (see [`Blocks::slabs`]) and handed on in clusters that
+    /// can be finished alone (see [`Sweep`]); each cluster is stitched and its lines grouped
+    /// (see [`groups`]), and a batch of groups of about a sixteenth of the memory is completed,
+    /// attributed and written before the next is gathered. The curves come in the order their
+    /// clusters were handed on, a cluster's in the order of its groups' first lines. Returns the
+    /// number of batches written; `counts` gets the polylines stitched, the edge points the
+    /// consensus filter dropped, and the curves kept and left out.
+    fn complete(&self, grouped: &[DVec3], blocks: &Blocks, origin: DVec3, r: &Resolved, outside: &Outside, counts: &mut Counts) -> Result<u32> {
         let cp = polylines::complete_params(r);
         let reach = cp.reach * cp.step;
+        let (join, merge) = (stitch::JOIN_STEPS * r.step, stitch::MERGE_STEPS * r.step);
+        // (A piece's vertices lie within the growth halo of its block.)
+        let halo = blocks::HALO_STEPS * r.step * 1.001;
+        let (axis, slabs) = blocks.slabs();
+        let mut sweep = Sweep::new(axis, join, 2.0 * reach * (1.0 + 1e-9) + 2.0 * merge);
         // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
         let budget = (self.opts.memory / 16 / 140).max(256) as usize;
-        let all = self.groups(store, plans, plan_ends, reach, budget)?;
         let corners = groups::Corners::new(grouped, reach);
-        let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
-        let (mut traced, mut written) = (0, 0);
-        (counts.curves, counts.left_out) = (0, 0);
+        let mut batch = Batch { traced: 0, written: 0, groups: vec![], vertices: 0 };
+        let mut debug_lines = vec![];
+        (counts.grown, counts.unconfirmed, counts.curves, counts.left_out) = (0, 0, 0, 0);
         self.ws.create_dir(Finished::DIR)?;
-        for batch in batches(all.iter().map(|g| g.iter().map(|&i| store.size(&plans[i as usize])).sum()), budget) {
-            let wanted: Vec<&Plan> = batch.iter().flat_map(|&g| all[g].iter().map(|&i| &plans[i as usize])).collect();
-            let mut lines = store.lines(&wanted)?.into_iter().zip(wanted).map(|(v, p)| Curve::new(v, p.closed));
-            let groups: Vec<Vec<Curve>> = batch.iter().map(|&g| lines.by_ref().take(all[g].len()).collect()).collect();
-            let curves: Vec<Curve> = groups
-                .into_par_iter()
-                .map(|group| {
-                    let near = corners.near(group.iter().filter(|c| !c.closed).flat_map(|c| [c.v[0], c.v[c.v.len() - 1]]));
-                    complete::complete(group, &near, &cp, &self.opts.cancel)
-                })
-                .flatten()
-                .collect();
-            self.opts.cancel.check()?;
-            let attributed = self.attribute(curves, blocks, origin, r, traced)?;
-            traced += attributed.len() as u32;
-            let mut kept: Vec<Polyline> = attributed.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
-            outside.label(&mut kept);
-            counts.curves += kept.len() as u64;
-            records::write(&self.ws, written, &Finished(kept))?;
-            written += 1;
+        let bar = self.progress.bar("completion", slabs.len() as u64, "slabs");
+        for (k, slab) in slabs.iter().enumerate() {
+            let read = slab.par_iter().map(|&b| self.block_pieces(blocks, origin, b)).collect::<Result<Vec<_>>>()?;
+            let mut held = vec![];
+            for (&b, (pieces, unconfirmed)) in slab.iter().zip(read) {
+                counts.unconfirmed += unconfirmed;
+                held.extend(pieces.into_iter().enumerate().map(|(i, piece)| Held { id: (b as u64) << 32 | i as u64, block: b, piece }));
+            }
+            let beyond =
+                slabs.get(k + 1).map_or(f64::INFINITY, |next| next.iter().map(|&b| blocks.list[b as usize].lo[axis]).fold(f64::INFINITY, f64::min) - halo);
+            for cluster in sweep.add(held, beyond) {
+                let lines = stitch::stitch(cluster.into_iter().map(|h| (h.block, h.piece)).collect(), join, merge);
+                counts.grown += lines.len() as u64;
+                if self.opts.debug.on() {
+                    debug_lines.extend(lines.iter().map(|l| l.0.clone()));
+                }
+                let groups = groups::groups(&lines, reach);
+                let mut lines: Vec<Option<stitch::Line>> = lines.into_iter().map(Some).collect();
+                for group in groups {
+                    let curves: Vec<Curve> = group.iter().filter_map(|&i| lines[i as usize].take()).map(|(v, closed)| Curve::new(v, closed)).collect();
+                    batch.vertices += curves.iter().map(|c| c.v.len()).sum::<usize>();
+                    batch.groups.push(curves);
+                    if batch.vertices >= budget {
+                        self.finish_batch(&mut batch, &corners, &cp, blocks, origin, r, outside, counts)?;
+                    }
+                }
+            }
+            bar.inc(1);
         }
-        counts.left_out = traced as u64 - counts.curves;
-        counts.batches = written as u64;
+        debug_assert_eq!(sweep.held(), 0);
+        if !batch.groups.is_empty() || batch.written == 0 {
+            self.finish_batch(&mut batch, &corners, &cp, blocks, origin, r, outside, counts)?;
+        }
+        bar.finish();
+        if self.opts.debug.on() {
+            let pl: Vec<Polyline> = debug_lines.iter().enumerate().map(|(i, l)| Polyline::from_points(i as u32, l.iter().map(|p| *p + origin))).collect();
+            self.opts.debug.polylines("grown.obj", &pl);
+        }
+        counts.left_out = batch.traced as u64 - counts.curves;
+        counts.batches = batch.written as u64;
         // (Batches of an earlier invocation beyond this one's are stale.)
-        for k in written.. {
+        for k in batch.written.. {
             let name = records::name(Finished::DIR, k);
             if !self.ws.exists(&name) {
                 break;
             }
             self.ws.remove(&name);
         }
-        Ok(written)
+        Ok(batch.written)
     }
 
-    /// The groups of the polylines `plans` that completion can complete apart (see
-    /// [`groups`]): each open polyline's ends (from `plan_ends`, dropped once indexed), then
-    /// every polyline's vertices, gathered in batches of about `budget` vertices, linked to the
-    /// ends near them.
-    fn groups(&self, store: &mut PieceStore, plans: &[Plan], plan_ends: Vec<PlanEnds>, reach: f64, budget: usize) -> Result<Vec<Vec<u32>>> {
-        let mut ends = vec![];
-        for (i, (p, e)) in plans.iter().zip(plan_ends).enumerate().filter(|(_, (p, _))| !p.closed) {
-            let [a, b] = match e {
-                Some(e) => e,
-                None => {
-                    let v = store.lines(&[p])?.remove(0);
-                    [v[0], v[v.len() - 1]]
-                }
-            };
-            ends.extend([(i as u32, a), (i as u32, b)]);
-        }
-        let mut linker = groups::Linker::new(plans.len(), ends, reach);
-        for batch in batches(plans.iter().map(|p| store.size(p)), budget) {
-            let lines = store.lines(&batch.iter().map(|&i| &plans[i]).collect::<Vec<_>>())?;
-            let near: Vec<Vec<u32>> = lines.par_iter().map(|v| linker.near(v)).collect();
-            for (&i, others) in batch.iter().zip(near) {
-                linker.link(i as u32, &others);
-            }
-        }
-        Ok(linker.groups())
+    /// Completes `batch`'s groups (each alone, with the corners within the reach of its ends),
+    /// attributes the curves, and writes those the output filters keep as the next
+    /// [`Finished`] record; the batch is then empty.
+    #[allow(clippy::too_many_arguments)]
+    fn finish_batch(
+        &self,
+        batch: &mut Batch,
+        corners: &groups::Corners,
+        cp: &complete::CompleteParams,
+        blocks: &Blocks,
+        origin: DVec3,
+        r: &Resolved,
+        outside: &Outside,
+        counts: &mut Counts,
+    ) -> Result<()> {
+        let curves: Vec<Curve> = std::mem::take(&mut batch.groups)
+            .into_par_iter()
+            .map(|group| {
+                let near = corners.near(group.iter().filter(|c| !c.closed).flat_map(|c| [c.v[0], c.v[c.v.len() - 1]]));
+                complete::complete(group, &near, cp, &self.opts.cancel)
+            })
+            .flatten()
+            .collect();
+        batch.vertices = 0;
+        self.opts.cancel.check()?;
+        let attributed = self.attribute(curves, blocks, origin, r, batch.traced)?;
+        batch.traced += attributed.len() as u32;
+        let (min_confidence, min_length) = (self.opts.min_confidence, self.opts.min_length);
+        let mut kept: Vec<Polyline> = attributed.into_iter().filter(|c| c.confidence as f64 >= min_confidence && c.length() >= min_length).collect();
+        outside.label(&mut kept);
+        counts.curves += kept.len() as u64;
+        records::write(&self.ws, batch.written, &Finished(kept))?;
+        batch.written += 1;
+        Ok(())
     }
 
     /// Each curve's vertex normals and evidence, from the smoothed edge points a block at a
@@ -552,53 +546,15 @@ impl Curves for FinishedCurves<'_> {
     }
 }
 
-/// The items of sizes `sizes`, by number, in runs of consecutive items whose sizes add up to
-/// `budget` or just past it (one run, empty, if there are none).
-fn batches(sizes: impl Iterator<Item = usize>, budget: usize) -> Vec<Vec<usize>> {
-    let mut out: Vec<Vec<usize>> = vec![vec![]];
-    let mut held = 0;
-    for (i, n) in sizes.enumerate() {
-        if held >= budget {
-            out.push(vec![]);
-            held = 0;
-        }
-        out.last_mut().unwrap().push(i);
-        held += n;
-    }
-    out
-}
-
-/// The pieces' vertices, read from their blocks' records as the polylines are gathered.
-struct PieceStore<'a> {
-    run: &'a Run<'a>,
-    /// Each piece's block and number of vertices.
-    pieces: &'a [(u32, u32)],
-    first: &'a [u32],
-    merge: f64,
-    recent: Recent<Pieces>,
-}
-
-impl PieceStore<'_> {
-    /// The number of vertices of the pieces of `plan` (a few more than its own, where their
-    /// ends were merged).
-    fn size(&self, plan: &Plan) -> usize {
-        plan.parts.iter().map(|&(k, _)| self.pieces[k as usize].1 as usize).sum()
-    }
-
-    /// The vertices of the polylines `plans`, in order.
-    fn lines(&mut self, plans: &[&Plan]) -> Result<Vec<Vec<DVec3>>> {
-        let mut wanted: Vec<u32> = plans.iter().flat_map(|p| p.parts.iter().map(|&(k, _)| self.pieces[k as usize].0)).collect();
-        wanted.sort_unstable();
-        wanted.dedup();
-        let ws = &self.run.ws;
-        let held = self.recent.get(&wanted, |b| records::read::<Pieces>(ws, b))?;
-        let piece = |k: u32| {
-            let b = self.pieces[k as usize].0;
-            let record = &held[wanted.binary_search(&b).unwrap_or_default()];
-            &record.pieces[(k - self.first[b as usize]) as usize].v[..]
-        };
-        Ok(plans.iter().map(|p| stitch::gather(p, piece, self.merge)).collect())
-    }
+/// Groups of lines waiting to be completed, and what the batches so far came to.
+struct Batch {
+    /// Curves traced in the batches written.
+    traced: u32,
+    /// Batches written.
+    written: u32,
+    /// The groups waiting, and their vertices in all.
+    groups: Vec<Vec<Curve>>,
+    vertices: usize,
 }
 
 /// The last few records read (tiles' edge points, blocks' smoothed edge points), up to a number
@@ -617,12 +573,6 @@ trait Points {
 impl Points for Vec<WorldEdge> {
     fn points(&self) -> u64 {
         self.len() as u64
-    }
-}
-
-impl Points for Pieces {
-    fn points(&self) -> u64 {
-        self.pieces.iter().map(|p| p.v.len() as u64).sum()
     }
 }
 
