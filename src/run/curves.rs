@@ -272,6 +272,17 @@ impl Run<'_> {
         bar.inc((share.len() - todo.len()) as u64);
         // (Neighbouring blocks read the same tiles: the last few decoded are kept.)
         let mut tiles = Recent::new(self.opts.memory / 16 / 48);
+        // (Only the corners within the smoothing's reach of a block can cap its neighbourhoods:
+        // each block takes those, found along x, rather than indexing every corner again.)
+        let mut along_x: Vec<u32> = (0..grouped.len() as u32).collect();
+        along_x.sort_by(|&a, &b| grouped[a as usize].x.total_cmp(&grouped[b as usize].x).then(a.cmp(&b)));
+        let corners_in = |region: (DVec3, DVec3)| -> Vec<DVec3> {
+            let from = along_x.partition_point(|&k| grouped[k as usize].x < region.0.x);
+            let to = along_x.partition_point(|&k| grouped[k as usize].x <= region.1.x);
+            let mut near: Vec<u32> = along_x[from..to].iter().copied().filter(|&k| in_box(region, grouped[k as usize])).collect();
+            near.sort_unstable();
+            near.into_iter().map(|k| grouped[k as usize]).collect()
+        };
         // Stage 3 for block b: its smoothed, confirmed core and halo, its own edge points as
         // read (for the debug dump), and the seconds taken.
         let mut smooth = |b: usize| -> Result<(SmoothedEdges, Vec<DVec3>, Vec<DVec3>, f64)> {
@@ -304,7 +315,7 @@ impl Run<'_> {
             let points: Vec<DVec3> = own.points.iter().chain(&around.points).chain(&context.points).copied().collect();
             let normals: Vec<[glam::Vec3; 2]> = own.normals.iter().chain(&around.normals).chain(&context.normals).copied().collect();
             drop(context);
-            let (smoothed, keep) = polylines::smooth_and_confirm(&points, &normals, n_own + n_around, grouped, r);
+            let (smoothed, keep) = polylines::smooth_and_confirm(&points, &normals, n_own + n_around, &corners_in(region), r);
             let (mut core, mut halo_points) = (SmoothedEdges::default(), SmoothedEdges::default());
             for (i, (&p, k)) in smoothed.iter().zip(keep).enumerate() {
                 let to = if i < n_own { &mut core } else { &mut halo_points };
