@@ -763,11 +763,14 @@ mod tests {
             let (lines, corners) = scattered_lines(seed);
             let whole = complete(lines.clone(), &corners, &p, &crate::cancel::Cancel::default());
             let groups = super::super::groups::groups(&lines.iter().map(|c| (c.v.clone(), c.closed)).collect::<Vec<_>>(), reach);
-            let near = super::super::groups::Corners::new(&corners, reach);
+            let all = super::super::groups::Corners::new(&corners);
             let mut parts = vec![];
             for g in &groups {
                 let group: Vec<Curve> = g.iter().map(|&i| lines[i as usize].clone()).collect();
-                let corners = near.near(group.iter().filter(|c| !c.closed).flat_map(|c| [c.v[0], c.v[c.v.len() - 1]]));
+                // (Each group indexes only the corners near its ends' box, as a batch does.)
+                let ends: Vec<DVec3> = group.iter().filter(|c| !c.closed).flat_map(|c| [c.v[0], c.v[c.v.len() - 1]]).collect();
+                let (lo, hi) = ends.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+                let corners = all.near_box(lo, hi, reach).near(ends);
                 parts.extend(complete(group, &corners, &p, &crate::cancel::Cancel::default()));
             }
             // (The lines must interact, and fall into several groups, for this to say anything.)

@@ -43,24 +43,58 @@ pub fn groups(lines: &[(Vec<DVec3>, bool)], reach: f64) -> Vec<Vec<u32>> {
     sets.sets()
 }
 
-/// The corners of the projection stage, indexed, for handing each group those within the
-/// reach of its ends.
+/// The corners of the projection stage in the order of their x, for handing each block or
+/// batch of groups those near it, without indexing every corner of the cloud at once.
 pub struct Corners<'a> {
+    all: &'a [DVec3],
+    along_x: Vec<u32>,
+}
+
+impl<'a> Corners<'a> {
+    /// Sorts `all` along x.
+    pub fn new(all: &'a [DVec3]) -> Corners<'a> {
+        let mut along_x: Vec<u32> = (0..all.len() as u32).collect();
+        along_x.sort_unstable_by(|&a, &b| all[a as usize].x.total_cmp(&all[b as usize].x).then(a.cmp(&b)));
+        Corners { all, along_x }
+    }
+
+    /// The corners in the closed box `[lo, hi]`, by number, in their order.
+    fn numbers_in(&self, lo: DVec3, hi: DVec3) -> Vec<u32> {
+        let from = self.along_x.partition_point(|&k| self.all[k as usize].x < lo.x);
+        let to = self.along_x.partition_point(|&k| self.all[k as usize].x <= hi.x).max(from);
+        let p = |k: u32| self.all[k as usize];
+        let mut found: Vec<u32> = self.along_x[from..to].iter().copied().filter(|&k| p(k).cmpge(lo).all() && p(k).cmple(hi).all()).collect();
+        found.sort_unstable();
+        found
+    }
+
+    /// The corners in the closed box `[lo, hi]`, in their order.
+    pub fn within(&self, lo: DVec3, hi: DVec3) -> Vec<DVec3> {
+        self.numbers_in(lo, hi).into_iter().map(|k| self.all[k as usize]).collect()
+    }
+
+    /// The corners within `reach` of the box `[lo, hi]`, indexed for handing out those within
+    /// `reach` of ends in the box.
+    pub fn near_box(&self, lo: DVec3, hi: DVec3, reach: f64) -> NearCorners<'a> {
+        // (The margin covers the rounding of the distances.)
+        let reach = reach * (1.0 + 1e-9);
+        let m = DVec3::splat(reach * (1.0 + 1e-9));
+        let mut grid = HashGrid::new(reach.max(f64::MIN_POSITIVE));
+        for k in self.numbers_in(lo - m, hi + m) {
+            grid.insert(self.all[k as usize], k);
+        }
+        NearCorners { all: self.all, grid, reach }
+    }
+}
+
+/// Some of the corners of the projection stage, indexed (see [`Corners::near_box`]).
+pub struct NearCorners<'a> {
     all: &'a [DVec3],
     grid: HashGrid<u32>,
     reach: f64,
 }
 
-impl<'a> Corners<'a> {
-    /// Indexes `all`, to be handed out within `reach` of ends.
-    pub fn new(all: &'a [DVec3], reach: f64) -> Corners<'a> {
-        let mut grid = HashGrid::new(reach.max(f64::MIN_POSITIVE));
-        for (k, &q) in all.iter().enumerate() {
-            grid.insert(q, k as u32);
-        }
-        Corners { all, grid, reach: reach * (1.0 + 1e-9) }
-    }
-
+impl NearCorners<'_> {
     /// The corners within the reach of any of `ends`, in their order.
     pub fn near(&self, ends: impl IntoIterator<Item = DVec3>) -> Vec<DVec3> {
         let mut found = vec![];

@@ -272,17 +272,8 @@ impl Run<'_> {
         bar.inc((share.len() - todo.len()) as u64);
         // (Neighbouring blocks read the same tiles: the last few decoded are kept.)
         let mut tiles = Recent::new(self.opts.memory / 16 / 48);
-        // (Only the corners within the smoothing's reach of a block can cap its neighbourhoods:
-        // each block takes those, found along x, rather than indexing every corner again.)
-        let mut along_x: Vec<u32> = (0..grouped.len() as u32).collect();
-        along_x.sort_by(|&a, &b| grouped[a as usize].x.total_cmp(&grouped[b as usize].x).then(a.cmp(&b)));
-        let corners_in = |region: (DVec3, DVec3)| -> Vec<DVec3> {
-            let from = along_x.partition_point(|&k| grouped[k as usize].x < region.0.x);
-            let to = along_x.partition_point(|&k| grouped[k as usize].x <= region.1.x);
-            let mut near: Vec<u32> = along_x[from..to].iter().copied().filter(|&k| in_box(region, grouped[k as usize])).collect();
-            near.sort_unstable();
-            near.into_iter().map(|k| grouped[k as usize]).collect()
-        };
+        // (Only the corners within the smoothing's reach of a block can cap its neighbourhoods.)
+        let corners = groups::Corners::new(grouped);
         // Stage 3 for block b: its smoothed, confirmed core and halo, its own edge points as
         // read (for the debug dump), and the seconds taken.
         let mut smooth = |b: usize| -> Result<(SmoothedEdges, Vec<DVec3>, Vec<DVec3>, f64)> {
@@ -315,7 +306,7 @@ impl Run<'_> {
             let points: Vec<DVec3> = own.points.iter().chain(&around.points).chain(&context.points).copied().collect();
             let normals: Vec<[glam::Vec3; 2]> = own.normals.iter().chain(&around.normals).chain(&context.normals).copied().collect();
             drop(context);
-            let (smoothed, keep) = polylines::smooth_and_confirm(&points, &normals, n_own + n_around, &corners_in(region), r);
+            let (smoothed, keep) = polylines::smooth_and_confirm(&points, &normals, n_own + n_around, &corners.within(region.0, region.1), r);
             let (mut core, mut halo_points) = (SmoothedEdges::default(), SmoothedEdges::default());
             for (i, (&p, k)) in smoothed.iter().zip(keep).enumerate() {
                 let to = if i < n_own { &mut core } else { &mut halo_points };
@@ -389,7 +380,7 @@ impl Run<'_> {
         let mut sweep = Sweep::new(axis, join, 2.0 * reach * (1.0 + 1e-9) + 2.0 * merge);
         // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
         let budget = (self.opts.memory / 16 / 140).max(256) as usize;
-        let corners = groups::Corners::new(grouped, reach);
+        let corners = groups::Corners::new(grouped);
         let mut batch = Batch { traced: 0, written: 0, groups: vec![], vertices: 0 };
         let mut debug_lines = vec![];
         (counts.grown, counts.unconfirmed, counts.curves, counts.left_out) = (0, 0, 0, 0);
@@ -460,10 +451,13 @@ impl Run<'_> {
         outside: &Outside,
         counts: &mut Counts,
     ) -> Result<()> {
+        let ends = |c: &Curve| (!c.closed).then(|| [c.v[0], c.v[c.v.len() - 1]]).into_iter().flatten();
+        let (lo, hi) = batch.groups.iter().flatten().flat_map(ends).fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
+        let near = corners.near_box(lo, hi, cp.reach * cp.step);
         let curves: Vec<Curve> = std::mem::take(&mut batch.groups)
             .into_par_iter()
             .map(|group| {
-                let near = corners.near(group.iter().filter(|c| !c.closed).flat_map(|c| [c.v[0], c.v[c.v.len() - 1]]));
+                let near = near.near(group.iter().flat_map(ends));
                 complete::complete(group, &near, cp, &self.opts.cancel)
             })
             .flatten()
