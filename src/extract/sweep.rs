@@ -101,7 +101,7 @@ impl Sweep {
             }
         }
         // Each new piece against all pieces, and the pieces held before against the new ones:
-        // every pair is tested once, when the later of the two is added.
+        // every pair is tested when the later of the two is added, never again.
         let mut crossings = HashGrid::new(self.join);
         let mut ends = HashGrid::new(self.link);
         for (i, (h, _)) in items.iter().enumerate() {
