@@ -269,6 +269,12 @@ impl Blocks {
         (axis, slabs.into_values().collect())
     }
 
+    /// The least that any piece grown in the blocks `slab` (see [`Blocks::slabs`]) may hold
+    /// along `axis`: their lowest side less the growth halo `halo` (infinity for no blocks).
+    pub fn reach_below(&self, slab: &[u32], axis: usize, halo: f64) -> f64 {
+        slab.iter().map(|&b| self.list[b as usize].lo[axis]).fold(f64::INFINITY, f64::min) - halo
+    }
+
     /// The block whose core holds `p`, else the first whose box grown by `m` holds it. (Smoothed
     /// edge points, and polylines through them, may lie a little outside every block's core,
     /// at the edge cloud's fringes.)

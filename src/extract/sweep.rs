@@ -224,8 +224,7 @@ mod tests {
             let (mut parts, mut early, mut most) = (vec![], 0, 0);
             for (k, slab) in slabs.iter().enumerate() {
                 let held: Vec<Held> = pieces.iter().filter(|h| slab.contains(&h.block)).cloned().collect();
-                let beyond =
-                    slabs.get(k + 1).map_or(f64::INFINITY, |next| next.iter().map(|&b| blocks.list[b as usize].lo[axis]).fold(f64::INFINITY, f64::min) - halo);
+                let beyond = slabs.get(k + 1).map_or(f64::INFINITY, |next| blocks.reach_below(next, axis, halo));
                 let done = sweep.add(held, beyond);
                 most = most.max(sweep.held());
                 if k + 1 < slabs.len() {

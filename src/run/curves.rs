@@ -393,8 +393,7 @@ impl Run<'_> {
                 counts.unconfirmed += unconfirmed;
                 held.extend(pieces.into_iter().enumerate().map(|(i, piece)| Held { id: (b as u64) << 32 | i as u64, block: b, piece }));
             }
-            let beyond =
-                slabs.get(k + 1).map_or(f64::INFINITY, |next| next.iter().map(|&b| blocks.list[b as usize].lo[axis]).fold(f64::INFINITY, f64::min) - halo);
+            let beyond = slabs.get(k + 1).map_or(f64::INFINITY, |next| blocks.reach_below(next, axis, halo));
             for cluster in sweep.add(held, beyond) {
                 let lines = stitch::stitch(cluster.into_iter().map(|h| (h.block, h.piece)).collect(), join, merge);
                 counts.grown += lines.len() as u64;
