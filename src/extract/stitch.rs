@@ -21,43 +21,6 @@ pub const MERGE_STEPS: f64 = 0.25;
 /// A stitched polyline: its vertices, and whether it is closed.
 pub type Line = (Vec<DVec3>, bool);
 
-/// What the stitcher needs of a piece to plan the polylines: its end vertices, size, crossings
-/// and block, not the vertices between (see [`plan`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PieceEnds {
-    /// The block the piece was grown in.
-    pub block: u32,
-    /// Its first and last vertex.
-    pub first: DVec3,
-    /// See `first`.
-    pub last: DVec3,
-    /// Its number of vertices.
-    pub len: u32,
-    /// See [`Piece::ends`].
-    pub ends: [Option<DVec3>; 2],
-    /// See [`Piece::closed`].
-    pub closed: bool,
-}
-
-impl PieceEnds {
-    /// The ends of piece `p` of block `block`.
-    pub fn of(block: u32, p: &Piece) -> PieceEnds {
-        let (first, last) = (p.v.first().copied().unwrap_or_default(), p.v.last().copied().unwrap_or_default());
-        PieceEnds { block, first, last, len: p.v.len() as u32, ends: p.ends, closed: p.closed }
-    }
-}
-
-/// A stitched polyline before its vertices are gathered (see [`gather`]).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Plan {
-    /// Its pieces in order, each as numbered in [`plan`]'s input and true if taken backwards.
-    pub parts: Vec<(u32, bool)>,
-    /// True for a closed polyline.
-    pub closed: bool,
-    /// True where the chain of pieces came round to its first and its two ends were merged.
-    pub round: bool,
-}
-
 /// Joins `pieces` (each with the block it came from, in a fixed order) into polylines, in the
 /// order of their first piece. Crossings within `reach` of each other are paired; where two
 /// joined vertices lie within `merge`, they become one at their midpoint. (The curve stage
@@ -74,66 +37,42 @@ pub struct Plan {
 /// let lines = stitch(vec![(0, left), (1, right)], 0.5, 0.1);
 /// assert_eq!(lines, vec![(vec![x(-2.0), x(-0.5), x(0.6), x(2.0)], false)]);
 /// ```
-pub fn stitch(pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
-    let ends: Vec<PieceEnds> = pieces.iter().map(|(b, p)| PieceEnds::of(*b, p)).collect();
-    plan(&ends, reach, merge).iter().map(|l| (gather(l, |k| &pieces[k as usize].1.v, merge), l.closed)).collect()
-}
-
-/// Plans the polylines that [`stitch`] makes of the pieces whose ends are `pieces`: which
-/// pieces each joins and which way. Only the pieces' ends decide it: pieces are joined at
-/// paired crossings, and only the end vertices of joined pieces are merged.
-pub fn plan(pieces: &[PieceEnds], reach: f64, merge: f64) -> Vec<Plan> {
-    let links = pair_crossings(pieces, reach);
+pub fn stitch(mut pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
+    let links = pair_crossings(&pieces, reach);
     let mut seen = vec![false; pieces.len()];
     let mut out = vec![];
     for p in 0..pieces.len() {
         if seen[p] {
             continue;
         }
-        if pieces[p].closed {
-            seen[p] = true;
-            out.push(Plan { parts: vec![(p as u32, false)], closed: true, round: false });
+        seen[p] = true;
+        if pieces[p].1.closed {
+            out.push((std::mem::take(&mut pieces[p].1.v), true));
             continue;
         }
         let (first, mut enter, closed) = chain_start(&links, p);
-        // The line's vertex count and end vertices as `gather` will join them.
-        let (mut count, mut ends) = (0usize, [DVec3::ZERO; 2]);
-        let mut parts = vec![];
-        let mut at = first;
+        let (mut v, mut at) = (vec![], first);
         loop {
             seen[at] = true;
-            parts.push((at as u32, enter == 1));
-            let e = &pieces[at];
-            let (a, b) = if enter == 0 { (e.first, e.last) } else { (e.last, e.first) };
-            let len = e.len as usize;
-            if len > 0 {
-                if count > 0 && ends[1].distance(a) < merge {
-                    ends[1] = ends[1].lerp(a, 0.5);
-                    if count == 1 {
-                        ends[0] = ends[1];
-                    }
-                    if len > 1 {
-                        ends[1] = b;
-                    }
-                    count += len - 1;
-                } else {
-                    if count == 0 {
-                        ends[0] = a;
-                    }
-                    ends[1] = b;
-                    count += len;
-                }
+            let part = std::mem::take(&mut pieces[at].1.v);
+            if enter == 0 {
+                join(&mut v, part.into_iter(), merge);
+            } else {
+                join(&mut v, part.into_iter().rev(), merge);
             }
             match links[at][1 - enter] {
                 Some((q, f)) if q != first => (at, enter) = (q, f),
                 _ => break,
             }
         }
-        let round = closed && count > 2 && ends[0].distance(ends[1]) < merge;
-        count -= round as usize;
-        if count >= 2 {
-            let closed = closed && count > 2;
-            out.push(Plan { parts, closed, round });
+        // A chain that came round to its first piece: its two ends merged where they meet.
+        if closed && v.len() > 2 && v[0].distance(v[v.len() - 1]) < merge {
+            let last = v.pop().unwrap();
+            v[0] = v[0].lerp(last, 0.5);
+        }
+        if v.len() >= 2 {
+            let closed = closed && v.len() > 2;
+            out.push((v, closed));
         }
     }
     out
@@ -153,24 +92,6 @@ fn chain_start(links: &[[Option<(usize, usize)>; 2]], p: usize) -> (usize, usize
     (at, end, false)
 }
 
-/// The vertices of the polyline `plan`, from the vertices of each piece (`piece`, by number).
-pub fn gather<'a>(plan: &Plan, piece: impl Fn(u32) -> &'a [DVec3], merge: f64) -> Vec<DVec3> {
-    let mut v: Vec<DVec3> = vec![];
-    for &(k, backwards) in &plan.parts {
-        let p = piece(k);
-        if backwards {
-            join(&mut v, p.iter().rev().copied(), merge);
-        } else {
-            join(&mut v, p.iter().copied(), merge);
-        }
-    }
-    if plan.round {
-        let last = v.pop().unwrap();
-        v[0] = v[0].lerp(last, 0.5);
-    }
-    v
-}
-
 /// Appends `part` to `v`, its first vertex merged with `v`'s last where they lie within `merge`.
 fn join(v: &mut Vec<DVec3>, mut part: impl Iterator<Item = DVec3>, merge: f64) {
     if let Some(last) = v.last_mut()
@@ -186,10 +107,10 @@ fn join(v: &mut Vec<DVec3>, mut part: impl Iterator<Item = DVec3>, merge: f64) {
 }
 
 /// For each piece and end, the piece and end it is joined to.
-fn pair_crossings(pieces: &[PieceEnds], reach: f64) -> Vec<[Option<(usize, usize)>; 2]> {
+fn pair_crossings(pieces: &[(u32, Piece)], reach: f64) -> Vec<[Option<(usize, usize)>; 2]> {
     let cell = |p: DVec3| (p / reach).floor().to_array().map(|x| x as i64);
     let mut grid: HashMap<[i64; 3], Vec<(usize, usize)>> = HashMap::new();
-    for (i, p) in pieces.iter().enumerate() {
+    for (i, (_, p)) in pieces.iter().enumerate() {
         for e in 0..2 {
             if let Some(c) = p.ends[e] {
                 grid.entry(cell(c)).or_default().push((i, e));
@@ -198,11 +119,12 @@ fn pair_crossings(pieces: &[PieceEnds], reach: f64) -> Vec<[Option<(usize, usize
     }
     // (Which way a piece comes at its crossing: from its end vertex to the crossing.)
     let outward = |i: usize, e: usize| {
-        let end = if e == 0 { pieces[i].first } else { pieces[i].last };
-        pieces[i].ends[e].unwrap() - end
+        let p = &pieces[i].1;
+        let end = if e == 0 { p.v.first() } else { p.v.last() };
+        p.ends[e].unwrap() - end.copied().unwrap_or_default()
     };
     let mut pairs = vec![];
-    for (i, p) in pieces.iter().enumerate() {
+    for (i, (block, p)) in pieces.iter().enumerate() {
         for e in 0..2 {
             let Some(c) = p.ends[e] else { continue };
             let k = cell(c);
@@ -210,10 +132,10 @@ fn pair_crossings(pieces: &[PieceEnds], reach: f64) -> Vec<[Option<(usize, usize
                 for dy in -1..=1 {
                     for dz in -1..=1 {
                         for &(j, f) in grid.get(&[k[0] + dx, k[1] + dy, k[2] + dz]).map_or(&[][..], |v| &v[..]) {
-                            if (j, f) <= (i, e) || pieces[j].block == p.block {
+                            if (j, f) <= (i, e) || pieces[j].0 == *block {
                                 continue;
                             }
-                            let d = c.distance(pieces[j].ends[f].unwrap());
+                            let d = c.distance(pieces[j].1.ends[f].unwrap());
                             if d <= reach && outward(i, e).dot(outward(j, f)) <= 0.0 {
                                 pairs.push((d, i, e, j, f));
                             }
@@ -259,74 +181,78 @@ mod tests {
         assert_eq!(lines[0].0, vec![p(-1.0, -0.5), p(-0.5, -1.0), p(0.5, -1.0), p(1.0, -0.5), p(1.0, 0.5), p(0.5, 1.0), p(-0.5, 1.0), p(-1.0, 0.5)]);
     }
 
-    /// Stitching as it was done on whole pieces, before it was planned from their ends: each
-    /// chain's vertices joined piece by piece, a loop's ends merged, short lines dropped.
-    fn stitch_whole(pieces: &[(u32, Piece)], reach: f64, merge: f64) -> Vec<Line> {
-        let ends: Vec<PieceEnds> = pieces.iter().map(|(b, p)| PieceEnds::of(*b, p)).collect();
-        let links = pair_crossings(&ends, reach);
-        let (mut seen, mut out) = (vec![false; pieces.len()], vec![]);
-        for p in 0..pieces.len() {
-            if seen[p] {
-                continue;
-            }
-            let (first, mut enter, closed) = chain_start(&links, p);
-            let (mut v, mut at) = (vec![], first);
-            loop {
-                seen[at] = true;
-                let piece = pieces[at].1.v.clone();
-                if enter == 0 {
-                    join(&mut v, piece.into_iter(), merge);
-                } else {
-                    join(&mut v, piece.into_iter().rev(), merge);
-                }
-                match links[at][1 - enter] {
-                    Some((q, f)) if q != first => (at, enter) = (q, f),
-                    _ => break,
-                }
-            }
-            if closed && v.len() > 2 && v[0].distance(v[v.len() - 1]) < merge {
-                let last = v.pop().unwrap();
-                v[0] = v[0].lerp(last, 0.5);
-            }
-            if v.len() >= 2 {
-                let closed = closed && v.len() > 2;
-                out.push((v, closed));
-            }
-        }
-        out
-    }
-
     #[test]
-    fn planned_stitching_joins_as_whole_pieces_do() {
-        // Chains of pieces of one to three vertices round a circle, each piece in a block of
-        // its own, crossing into the next at whole arc lengths: the vertices lie at random along
-        // each piece's arc, so that some joined end vertices merge (also a lone vertex with
-        // both neighbours) and some do not; a third of the chains are broken, the rest close.
+    fn chains_round_a_circle_stitch_in_order_whichever_way_their_pieces_come() {
+        // Chains of pieces round a circle (arc length s in [0, n)), piece k in block k between
+        // its crossings at s = k and k + 1, given in shuffled order and each either way round.
+        // A piece has one or two vertices inside its arc and, at random, one just inside either
+        // crossing: two of those across a crossing lie within the merge distance and become
+        // one, other joined vertices do not. A third of the chains have no crossing at s = 0.
         let mut rng = crate::rng::Rng::new(7);
+        let (merge, reach) = (0.1, 0.05);
         let (mut merged, mut closed) = (0, 0);
         for round in 0..60 {
-            let n = 2 + round % 7;
+            // (Four pieces or more: each piece turns by 90 degrees at most, so that each comes
+            // at its crossings from its own side.)
+            let n = 4 + round % 6;
             let radius = n as f64 / std::f64::consts::TAU;
-            let at = |s: f64| DVec3::new(s.cos(), s.sin(), 0.0) * radius;
-            let along = |s: f64| at(s / radius);
-            let mut pieces = vec![];
+            let along = |s: f64| DVec3::new((s / radius).cos(), (s / radius).sin(), 0.0) * radius;
+            let arc = |p: DVec3| (p.y.atan2(p.x) * radius).rem_euclid(n as f64);
+            let broken = round % 3 == 0;
+            let (mut pieces, mut arcs) = (vec![], vec![]);
             for k in 0..n {
-                let len = 1 + (rng.next_u64() % 3) as usize;
-                let mut s: Vec<f64> = (0..len).map(|_| k as f64 + rng.range(0.0, 1.0)).collect();
+                let k0 = k as f64;
+                let mut s: Vec<f64> = (0..1 + rng.next_u64() % 2).map(|_| k0 + rng.range(0.2, 0.8)).collect();
+                for near in [k0 + 0.03, k0 + 0.97] {
+                    if rng.next_u64().is_multiple_of(2) {
+                        s.push(near);
+                    }
+                }
                 s.sort_by(f64::total_cmp);
-                let broken = round % 3 == 0 && k == 0;
-                let ends =
-                    [(!broken).then(|| along(k as f64) + DVec3::Z * rng.range(0.0, 0.01)), Some(along((k + 1) as f64) + DVec3::Z * rng.range(0.0, 0.01))];
-                pieces.push((k as u32, Piece { v: s.into_iter().map(along).collect(), ends, closed: false }));
+                arcs.push(s.clone());
+                let mut v: Vec<DVec3> = s.into_iter().map(along).collect();
+                let lift = |r: &mut crate::rng::Rng| DVec3::Z * r.range(0.0, 0.01);
+                let mut ends = [(!(broken && k == 0)).then(|| along(k0) + lift(&mut rng)), Some(along(k0 + 1.0) + lift(&mut rng))];
+                if rng.next_u64().is_multiple_of(2) {
+                    v.reverse();
+                    ends.reverse();
+                }
+                pieces.push((k as u32, Piece { v, ends, closed: false }));
             }
-            let (reach, merge) = (0.05, 0.3);
-            let whole = stitch_whole(&pieces, reach, merge);
-            assert_eq!(stitch(pieces.clone(), reach, merge), whole, "round {round}");
-            let ends: Vec<PieceEnds> = pieces.iter().map(|(b, p)| PieceEnds::of(*b, p)).collect();
-            for (plan, (v, _)) in plan(&ends, reach, merge).iter().zip(&whole) {
-                merged += plan.parts.iter().map(|&(k, _)| ends[k as usize].len as usize).sum::<usize>() - v.len();
-                closed += plan.closed as usize;
+            // Expected, in arc order: every vertex, those just inside a joined crossing from
+            // both sides merged (at s = 0 only if the chain closes).
+            let mut want: Vec<f64> = arcs.concat();
+            let crossings = if broken { 1..n } else { 1..n + 1 };
+            let joined: Vec<f64> =
+                crossings.filter(|&k| arcs[k - 1].last().unwrap().fract() > 0.9 && arcs[k % n][0].fract() < 0.1).map(|k| (k % n) as f64).collect();
+            want.retain(|&s| !joined.iter().any(|&c| (s - c).abs() < 0.1 || (s - c - n as f64).abs() < 0.1));
+            want.extend(&joined);
+            want.sort_by(f64::total_cmp);
+            for i in (1..pieces.len()).rev() {
+                pieces.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
             }
+            let lines = stitch(pieces, reach, merge);
+            assert_eq!(lines.len(), 1, "round {round}");
+            let (v, is_closed) = &lines[0];
+            // (A closed polyline has more than two vertices.)
+            assert_eq!(*is_closed, !broken && want.len() > 2, "round {round}");
+            // The vertices in order round the circle, one way or the other.
+            let step = |a: DVec3, b: DVec3| (arc(b) - arc(a) + n as f64 / 2.0).rem_euclid(n as f64) - n as f64 / 2.0;
+            let sign = step(v[0], v[1]).signum();
+            let wrap = *is_closed as usize;
+            for i in 0..v.len() - 1 + wrap {
+                let d = step(v[i], v[(i + 1) % v.len()]) * sign;
+                assert!(d > 0.0 && d < 1.6, "round {round}: {d} between vertices {i} and the next");
+            }
+            // (A vertex merged across s = 0 may come out just below n.)
+            let mut got: Vec<f64> = v.iter().map(|&p| arc(p)).map(|s| if n as f64 - s < 1e-9 { 0.0 } else { s }).collect();
+            got.sort_by(f64::total_cmp);
+            assert_eq!(got.len(), want.len(), "round {round}");
+            for (g, w) in got.iter().zip(&want) {
+                assert!((g - w).abs() < 1e-9, "round {round}: vertex at {g}, expected {w}");
+            }
+            merged += joined.len();
+            closed += *is_closed as usize;
         }
         assert!(merged > 20 && closed > 10, "{merged} vertices merged, {closed} closed");
     }
