@@ -43,10 +43,16 @@ impl Progress {
             pb.set_message(unit.to_string());
             Bar { pb: Some(pb), log: None, stage: stage.to_string(), unit: unit.to_string(), total }
         } else {
-            eprintln!("crease: {stage}: {total} {unit}");
+            eprintln!("crease: {stage}: {}", counted(total, unit));
             Bar { pb: None, log: Some(Mutex::new((Instant::now(), Instant::now(), 0))), stage: stage.to_string(), unit: unit.to_string(), total }
         }
     }
+}
+
+/// `total` of `unit` (a plural noun), in the singular for one: "1 tile", "3 tiles".
+fn counted(total: u64, unit: &str) -> String {
+    let unit = if total == 1 { unit.strip_suffix('s').unwrap_or(unit) } else { unit };
+    format!("{total} {unit}")
 }
 
 /// Progress of one stage.
@@ -82,5 +88,15 @@ impl Bar {
             let l = log.lock().unwrap();
             eprintln!("crease: {}: done in {:.1} s", self.stage, l.0.elapsed().as_secs_f64());
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn one_of_a_unit_is_singular() {
+        assert_eq!(super::counted(1, "slabs"), "1 slab");
+        assert_eq!(super::counted(0, "tiles"), "0 tiles");
+        assert_eq!(super::counted(64, "tiles"), "64 tiles");
     }
 }
