@@ -220,6 +220,10 @@ impl Quadric {
     /// Signed distance along the frame normal from the surface to `p` (the implicit function).
     #[inline]
     pub fn value(&self, p: DVec3) -> f64 {
+        // (A plane's height is zero: its value is the normal coordinate alone, the same number.)
+        if self.a == [0.0; 6] {
+            return (p - self.frame.o).dot(self.frame.n);
+        }
         let l = self.frame.local(p);
         l.z - self.height(l.x, l.y)
     }

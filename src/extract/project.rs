@@ -497,8 +497,9 @@ fn refine(surfs: &mut [Surface], pts: &[DVec3], x: DVec3, min_threshold: f64, to
         }
         let sides = |a: usize, b: usize| half_surfaces(&surfs[a], &surfs[b], x, tol);
         let pairs: [[Option<Sides>; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| if a < b && b < surfs.len() { sides(a, b) } else { None }));
+        let cores: Vec<Sides> = pairs.iter().flatten().flatten().copied().collect();
         for (j, &q) in pts.iter().enumerate() {
-            if pairs.iter().flatten().flatten().any(|s| s.in_core(q)) {
+            if cores.iter().any(|s| s.in_core(q)) {
                 continue;
             }
             let mut hit = [0usize; 2];
