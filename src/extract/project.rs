@@ -442,11 +442,13 @@ fn crease_split(pts: &[DVec3], members: &[usize], q: &Quadric, rss: f64) -> Opti
     let mut by: Vec<(f64, usize)> = members
         .iter()
         .map(|&j| {
-            let l = q.frame.local(pts[j]);
-            (l.x * c + l.y * s, j)
+            // (The frame's first two coordinates of the point, as `Frame::local` has them.)
+            let d = pts[j] - q.frame.o;
+            (d.dot(q.frame.u) * c + d.dot(q.frame.v) * s, j)
         })
         .collect();
-    by.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    // (No two keys are equal: the member breaks ties.)
+    by.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
     let n = by.len();
     // The plane through the sorted points lo..hi: its normal and residual sum of squares.
     let plane = |lo: usize, hi: usize| {
