@@ -499,9 +499,10 @@ fn refine(surfs: &mut [Surface], pts: &[DVec3], x: DVec3, min_threshold: f64, to
         }
         let sides = |a: usize, b: usize| half_surfaces(&surfs[a], &surfs[b], x, tol);
         let pairs: [[Option<Sides>; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| if a < b && b < surfs.len() { sides(a, b) } else { None }));
-        let cores: Vec<Sides> = pairs.iter().flatten().flatten().copied().collect();
+        // (The pairs that can exist: a < b < 3.)
+        let cores = [pairs[0][1], pairs[0][2], pairs[1][2]];
         for (j, &q) in pts.iter().enumerate() {
-            if cores.iter().any(|s| s.in_core(q)) {
+            if cores.iter().flatten().any(|s| s.in_core(q)) {
                 continue;
             }
             let mut hit = [0usize; 2];
