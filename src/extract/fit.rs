@@ -210,6 +210,11 @@ impl Quadric {
         Quadric { frame, a: [0.0; 6] }
     }
 
+    /// True if the surface is its frame's plane.
+    pub fn is_plane(&self) -> bool {
+        self.a == [0.0; 6]
+    }
+
     /// Height of the surface above (u, v).
     #[inline]
     pub fn height(&self, u: f64, v: f64) -> f64 {
@@ -221,7 +226,7 @@ impl Quadric {
     #[inline]
     pub fn value(&self, p: DVec3) -> f64 {
         // (A plane's height is zero: its value is the normal coordinate alone, the same number.)
-        if self.a == [0.0; 6] {
+        if self.is_plane() {
             return (p - self.frame.o).dot(self.frame.n);
         }
         let l = self.frame.local(p);
