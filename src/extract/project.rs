@@ -453,7 +453,7 @@ fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f
 /// `rss`, are better explained as two planes meeting at a crease (see [`CREASE_RATIO`]).
 /// Returns the points of the larger side.
 fn crease_split(pts: &[DVec3], members: &[usize], q: &Quadric, rss: f64) -> Option<Vec<usize>> {
-    let split = two_planes(pts, members, q)?;
+    let split = two_planes(pts, members, q, CREASE_RATIO * rss)?;
     if !split.crease_rather_than(rss) {
         return None;
     }
@@ -481,9 +481,10 @@ fn split_lone_plane(lone: &Surface, pts: &[DVec3], min_threshold: f64) -> Option
     }
     let (curved, plane_rss) = Quadric::fit_over_plane(lone.quad.frame, members.iter().map(|&j| (pts[j], 1.0)), 1e-3);
     let curved = curved?;
-    let split = two_planes(pts, &members, &curved)?;
     let n = members.len() as f64;
     let curved_rss: f64 = members.iter().map(|&j| curved.value(pts[j]).powi(2)).sum();
+    // (The F test below fails for a residual at or above plane_rss (n - 6) / (n + 24).)
+    let split = two_planes(pts, &members, &curved, (plane_rss * (n - 6.0) / (n + 24.0)).min(CREASE_RATIO * curved_rss))?;
     if (plane_rss - split.rss) * (n - 6.0) <= CURVATURE_F * 3.0 * split.rss || !split.crease_rather_than(curved_rss) {
         return None;
     }
@@ -516,7 +517,10 @@ impl TwoPlanes {
 /// `members` cut in two across the direction of strongest curvature of the quadric `q` fitted
 /// to them, at the best of seven positions (from 20% to 80% of the points), with a plane
 /// fitted to each side.
-fn two_planes(pts: &[DVec3], members: &[usize], q: &Quadric) -> Option<TwoPlanes> {
+/// None if no cut can leave a residual sum of squares below `bound`: most lone planes lie on
+/// one flat surface, where telling that from bounds (see [`least_eigenvalue_above`]) takes a
+/// pass over the points instead of the fourteen fits.
+fn two_planes(pts: &[DVec3], members: &[usize], q: &Quadric, bound: f64) -> Option<TwoPlanes> {
     let phi = q.strongest_curvature_angle();
     let (c, s) = (phi.cos(), phi.sin());
     let mut by: Vec<(f64, usize)> = members
@@ -530,17 +534,17 @@ fn two_planes(pts: &[DVec3], members: &[usize], q: &Quadric) -> Option<TwoPlanes
     // (No two keys are equal: the member breaks ties.)
     by.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
     let n = by.len();
+    let cuts: Vec<usize> = (2..=8).map(|tenth| n * tenth / 10).filter(|&k| k >= 6 && n - k >= 6).collect();
+    if !may_fit_below(pts, &by, q.frame.o, &cuts, bound) {
+        return None;
+    }
     // The plane through the sorted points lo..hi: its normal and residual sum of squares.
     let plane = |lo: usize, hi: usize| {
         let pca = Pca::of(by[lo..hi].iter().map(|&(_, j)| (pts[j], 1.0))).expect("points");
         (pca.normal(), pca.values[2] * (hi - lo) as f64)
     };
     let mut best: Option<(f64, usize, [DVec3; 2])> = None;
-    for tenth in 2..=8 {
-        let k = n * tenth / 10;
-        if k < 6 || n - k < 6 {
-            continue;
-        }
+    for &k in &cuts {
         let ((na, ra), (nb, rb)) = (plane(0, k), plane(k, n));
         if best.as_ref().is_none_or(|b| ra + rb < b.0) {
             best = Some((ra + rb, k, [na, nb]));
@@ -553,6 +557,65 @@ fn two_planes(pts: &[DVec3], members: &[usize], q: &Quadric) -> Option<TwoPlanes
         v
     };
     Some(TwoPlanes { rss, normals, sides: [side(&by[..k]), side(&by[k..])] })
+}
+
+/// False if, at every one of `cuts` through the sorted points `by`, the two sides' planes
+/// leave a residual sum of squares (the sides' smallest covariance eigenvalues times their
+/// counts) above `bound` for certain. The sides' moments (about `o`, near the points) come
+/// from running sums, and each eigenvalue from below.
+fn may_fit_below(pts: &[DVec3], by: &[(f64, usize)], o: DVec3, cuts: &[usize], bound: f64) -> bool {
+    // Sums of d and of the products of its coordinates (xx, xy, xz, yy, yz, zz).
+    let mut sums = vec![];
+    let (mut s1, mut s2, mut at) = (DVec3::ZERO, [0.0f64; 6], 0);
+    for &k in cuts.iter().chain([&by.len()]) {
+        for &(_, j) in &by[at..k] {
+            let d = pts[j] - o;
+            s1 += d;
+            s2 = [s2[0] + d.x * d.x, s2[1] + d.x * d.y, s2[2] + d.x * d.z, s2[3] + d.y * d.y, s2[4] + d.y * d.z, s2[5] + d.z * d.z];
+        }
+        at = k;
+        sums.push((k as f64, s1, s2));
+    }
+    let (n, t1, t2) = *sums.last().expect("the whole");
+    let rss = |count: f64, s1: DVec3, s2: [f64; 6]| {
+        let m = s1 / count;
+        let c = [
+            s2[0] / count - m.x * m.x,
+            s2[1] / count - m.x * m.y,
+            s2[2] / count - m.x * m.z,
+            s2[3] / count - m.y * m.y,
+            s2[4] / count - m.y * m.z,
+            s2[5] / count - m.z * m.z,
+        ];
+        // (Rounding in the sums is far below this allowance, a billionth of the spread.)
+        (least_eigenvalue_above(c) - 1e-9 * (c[0] + c[3] + c[5])) * count
+    };
+    cuts.iter().zip(&sums).any(|(_, &(k, s1, s2))| {
+        let mut rest = [0.0; 6];
+        (0..6).for_each(|i| rest[i] = t2[i] - s2[i]);
+        rss(k, s1, s2) + rss(n - k, t1 - s1, rest) <= bound
+    })
+}
+
+/// A lower bound of the smallest eigenvalue of a symmetric positive semi-definite 3 x 3 matrix
+/// (entries xx, xy, xz, yy, yz, zz): Newton's method on its characteristic polynomial from 0.
+/// Left of its smallest root the polynomial rises and is concave, so every step stays below
+/// the root; four steps come within a thousandth of it when that eigenvalue is small.
+fn least_eigenvalue_above(c: [f64; 6]) -> f64 {
+    let [a, b, d, e, f, g] = c;
+    let trace = a + e + g;
+    let minors = a * e - b * b + a * g - d * d + e * g - f * f;
+    let det = a * (e * g - f * f) - b * (b * g - f * d) + d * (b * f - e * d);
+    let mut l = 0.0f64;
+    for _ in 0..4 {
+        let value = ((l - trace) * l + minors) * l - det;
+        let slope = (3.0 * l - 2.0 * trace) * l + minors;
+        if slope <= 0.0 || value >= 0.0 {
+            break;
+        }
+        l -= value / slope;
+    }
+    l.max(0.0)
 }
 
 /// Re-fits the surfaces meeting near the candidate on the points that belong to each:
@@ -789,6 +852,28 @@ mod tests {
             let pts = noisy_patch(seed, |x, _| 0.4 - (0.16 - x * x).sqrt());
             let (q, _) = fit_surface(&pts, &all, DVec3::Z, 1e-4).unwrap();
             assert!(curved(&q), "seed {seed}: the cylinder was not fitted as curved");
+        }
+    }
+
+    #[test]
+    fn the_bound_on_the_least_eigenvalue_is_below_it_and_close_where_it_is_small() {
+        let mut rng = Rng::stream(5, 0);
+        for _ in 0..2000 {
+            // A covariance with random axes and spreads, down to a flat one.
+            let (u, v) = (rng.in_ball(1.0).normalize(), rng.in_ball(1.0));
+            let w = u.cross(v).normalize();
+            let axes = [u, w.cross(u), w];
+            let spread = [rng.range(0.1, 1.0), rng.range(0.05, 1.0), rng.range(0.0, 0.05).powi(2)];
+            let mut c = [0.0; 6];
+            for (a, s) in axes.iter().zip(spread) {
+                for (i, (x, y)) in [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)].into_iter().enumerate() {
+                    c[i] += s * a[x] * a[y];
+                }
+            }
+            let least = crate::extract::fit::symmetric_eigen3(c).0.into_iter().fold(f64::INFINITY, f64::min);
+            let bound = least_eigenvalue_above(c);
+            assert!(bound <= least * (1.0 + 1e-9) + 1e-15, "{bound} above {least}");
+            assert!(bound >= 0.999 * least, "{bound} far below {least} ({spread:?})");
         }
     }
 
