@@ -517,6 +517,7 @@ impl TwoPlanes {
 /// `members` cut in two across the direction of strongest curvature of the quadric `q` fitted
 /// to them, at the best of seven positions (from 20% to 80% of the points), with a plane
 /// fitted to each side.
+///
 /// None if no cut can leave a residual sum of squares below `bound`: most lone planes lie on
 /// one flat surface, where telling that from bounds (see [`least_eigenvalue_above`]) takes a
 /// pass over the points instead of the fourteen fits.
@@ -590,11 +591,7 @@ fn may_fit_below(pts: &[DVec3], by: &[(f64, usize)], o: DVec3, cuts: &[usize], b
         // (Rounding in the sums is far below this allowance, a billionth of the spread.)
         (least_eigenvalue_above(c) - 1e-9 * (c[0] + c[3] + c[5])) * count
     };
-    cuts.iter().zip(&sums).any(|(_, &(k, s1, s2))| {
-        let mut rest = [0.0; 6];
-        (0..6).for_each(|i| rest[i] = t2[i] - s2[i]);
-        rss(k, s1, s2) + rss(n - k, t1 - s1, rest) <= bound
-    })
+    sums[..cuts.len()].iter().any(|&(k, s1, s2)| rss(k, s1, s2) + rss(n - k, t1 - s1, std::array::from_fn(|i| t2[i] - s2[i])) <= bound)
 }
 
 /// A lower bound of the smallest eigenvalue of a symmetric positive semi-definite 3 x 3 matrix
