@@ -439,7 +439,7 @@ fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f
     {
         let rq = rms(&q);
         let n = members.len() as f64;
-        if (rp * rp - rq * rq) * (n - 6.0) > CURVATURE_F * 3.0 * rq * rq {
+        if significant(rp * rp, rq * rq, n) {
             if let Some(side) = crease_split(pts, members, &q, rq * rq * n) {
                 return fit_surface(pts, &side, orient, min_threshold);
             }
@@ -447,6 +447,19 @@ fn fit_surface(pts: &[DVec3], members: &[usize], orient: DVec3, min_threshold: f
         }
     }
     Some((plane, rp))
+}
+
+/// True if a model with three more parameters than a simpler one explains significantly more
+/// of `n` points than noise would: it leaves residual `rich` (a sum or mean of squares) where
+/// the simpler one leaves `simple`, and the F statistic ((simple - rich) / 3) / (rich / (n - 6))
+/// is above [`CURVATURE_F`].
+fn significant(simple: f64, rich: f64, n: f64) -> bool {
+    (simple - rich) * (n - 6.0) > CURVATURE_F * 3.0 * rich
+}
+
+/// The residual below which a richer model is [`significant`] against `simple`.
+fn significant_below(simple: f64, n: f64) -> f64 {
+    simple * (n - 6.0) / (n - 6.0 + 3.0 * CURVATURE_F)
 }
 
 /// Whether `members`, to which the curved quadric `q` was fitted with residual sum of squares
@@ -467,9 +480,8 @@ fn crease_split(pts: &[DVec3], members: &[usize], q: &Quadric, rss: f64) -> Opti
 /// towards it, and what it leaves of that side is too little to be found as a surface, or is
 /// taken for the plane's leftovers (fandisk at 2 kappa: 160 of 190 candidates along a missed
 /// ridge foot had one surface). Its points are two planes meeting at a crease if the planes
-/// explain significantly more than noise would, the F statistic
-/// ((RSS_plane - RSS_two) / 3) / (RSS_two / (n - 6)) above [`CURVATURE_F`], and fit them
-/// better than a curved surface, as in [`crease_split`].
+/// explain significantly more than the plane (see [`significant`]), and fit them better than a
+/// curved surface, as in [`crease_split`].
 fn split_lone_plane(lone: &Surface, pts: &[DVec3], min_threshold: f64) -> Option<Vec<Surface>> {
     if !lone.quad.is_plane() {
         // (A curved surface was tested against two planes when it was fitted.)
@@ -483,9 +495,8 @@ fn split_lone_plane(lone: &Surface, pts: &[DVec3], min_threshold: f64) -> Option
     let curved = curved?;
     let n = members.len() as f64;
     let curved_rss: f64 = members.iter().map(|&j| curved.value(pts[j]).powi(2)).sum();
-    // (The F test below fails for a residual at or above plane_rss (n - 6) / (n + 24).)
-    let split = two_planes(pts, &members, &curved, (plane_rss * (n - 6.0) / (n + 24.0)).min(CREASE_RATIO * curved_rss))?;
-    if (plane_rss - split.rss) * (n - 6.0) <= CURVATURE_F * 3.0 * split.rss || !split.crease_rather_than(curved_rss) {
+    let split = two_planes(pts, &members, &curved, significant_below(plane_rss, n).min(CREASE_RATIO * curved_rss))?;
+    if !significant(plane_rss, split.rss, n) || !split.crease_rather_than(curved_rss) {
         return None;
     }
     let orient = lone.quad.frame.n;
