@@ -72,6 +72,10 @@ pub struct Counts {
     /// Curves left out for confidence or length below `--min-confidence` or `--min-length`.
     #[serde(default)]
     pub left_out: u64,
+    /// Clusters of pieces of polylines cut because they outgrew
+    /// [`sweep::MAX_CLUSTER_VERTICES`]: lines across such a cut come out in two.
+    #[serde(default)]
+    pub clusters_cut: u64,
     /// Batches in which the curve stage completed, attributed and wrote the curves (see
     /// [`groups`]): more as the curves outgrow a sixteenth of `--memory`.
     #[serde(default)]

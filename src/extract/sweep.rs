@@ -13,6 +13,16 @@
 //! grouping and completing its lines, gives the curves that doing so for all pieces gives for
 //! it. A cluster is handed on once the sweep is past it, when every piece yet to come lies
 //! farther than both distances from every piece of it.
+//!
+//! Clusters are as large as the links make them, and where edge pieces lie thick everywhere
+//! (tree crowns of a wooded aerial scan) they percolate: one cluster can reach across the
+//! whole scan. So a cluster is bounded: once its pieces hold more than
+//! [`MAX_CLUSTER_VERTICES`], those the sweep is past are handed on as a cluster of their own
+//! and the rest go on. That cut is the one place where the curves can differ from finishing
+//! all pieces at once: a line across it comes out in two, and completion does not look across
+//! it. It depends only on the pieces and the blocks (world-aligned, sized in the spacing), so
+//! the curves still do not depend on the tiling, the thread count or `--memory`; the curve
+//! stage counts the cuts and warns of them.
 
 use super::blocks::Piece;
 use crate::grid::HashGrid;
@@ -45,11 +55,20 @@ impl Held {
     }
 }
 
+/// Most vertices a cluster's pieces may hold before the pieces the sweep is past are cut off
+/// and handed on (see the module notes): about 40 MB while the cluster is stitched and
+/// completed, and some hundred times the largest cluster we have seen (in a wooded aerial scan).
+pub const MAX_CLUSTER_VERTICES: usize = 1 << 18;
+
 /// The sweep: the pieces whose clusters may still grow.
 pub struct Sweep {
     axis: usize,
     join: f64,
     link: f64,
+    /// Most vertices of a cluster (see [`MAX_CLUSTER_VERTICES`]).
+    most: usize,
+    /// Clusters cut so far.
+    cuts: u64,
     /// The pieces held, in order, each with its cluster's number (as numbered when last
     /// handed back).
     front: Vec<(Held, u32)>,
@@ -59,7 +78,17 @@ impl Sweep {
     /// A sweep along `axis` that clusters pieces whose crossings lie within `join`, or a vertex
     /// of one within `link` of an end vertex of the other.
     pub fn new(axis: usize, join: f64, link: f64) -> Sweep {
-        Sweep { axis, join, link, front: vec![] }
+        Sweep { axis, join, link, most: MAX_CLUSTER_VERTICES, cuts: 0, front: vec![] }
+    }
+
+    /// The same sweep with clusters cut once they hold more than `most` vertices.
+    pub fn bounded(self, most: usize) -> Sweep {
+        Sweep { most, ..self }
+    }
+
+    /// The number of times a cluster was cut because it outgrew the bound.
+    pub fn cuts(&self) -> u64 {
+        self.cuts
     }
 
     /// The number of pieces held, waiting for their clusters to be complete.
@@ -70,7 +99,8 @@ impl Sweep {
     /// Adds `slab`'s pieces, numbered after every piece added before, and returns the clusters
     /// that no piece yet to come can join, given that every such piece lies at `beyond` or
     /// farther along the axis (infinity after the last slab): each cluster its pieces in order,
-    /// the clusters in the order of their first pieces.
+    /// the clusters in the order of their first pieces. (A cluster cut for its size, see
+    /// [`MAX_CLUSTER_VERTICES`], comes where the whole would have.)
     ///
     /// ```
     /// use crease::extract::blocks::Piece;
@@ -130,15 +160,23 @@ impl Sweep {
         let reach = self.join.max(self.link);
         let mut slots: Vec<Option<Held>> = items.into_iter().map(|(h, _)| Some(h)).collect();
         let (mut done, mut waiting) = (vec![], 0);
+        let past = |h: &Held| h.reach_along(self.axis) + reach < beyond;
         for cluster in sets.sets() {
-            let pieces: Vec<Held> = cluster.iter().filter_map(|&i| slots[i as usize].take()).collect();
-            let farthest = pieces.iter().map(|h| h.reach_along(self.axis)).fold(f64::NEG_INFINITY, f64::max);
-            if farthest + reach < beyond {
+            let mut pieces: Vec<Held> = cluster.iter().filter_map(|&i| slots[i as usize].take()).collect();
+            if pieces.iter().all(past) {
                 done.push(pieces);
-            } else {
-                self.front.extend(pieces.into_iter().map(|h| (h, waiting)));
-                waiting += 1;
+                continue;
             }
+            if pieces.iter().map(|h| h.piece.v.len()).sum::<usize>() > self.most {
+                let (behind, ahead): (Vec<Held>, Vec<Held>) = pieces.into_iter().partition(past);
+                if !behind.is_empty() {
+                    done.push(behind);
+                    self.cuts += 1;
+                }
+                pieces = ahead;
+            }
+            self.front.extend(pieces.into_iter().map(|h| (h, waiting)));
+            waiting += 1;
         }
         self.front.sort_by_key(|(h, _)| h.id);
         done
@@ -243,5 +281,59 @@ mod tests {
             assert!(whole.len() > 10 && whole.iter().any(|g| g.len() > 2), "seed {seed}: {} groups", whole.len());
             assert_eq!(parts, whole, "seed {seed}");
         }
+    }
+
+    #[test]
+    fn a_cluster_reaching_across_the_scan_is_cut_where_the_sweep_is_past_it() {
+        // A thicket: short pieces scattered along a band through 16 blocks, each within the
+        // link distance of the next, so that all of them are one cluster.
+        let step = 0.3;
+        let (join, merge, reach) = (stitch::JOIN_STEPS * step, stitch::MERGE_STEPS * step, 4.0 * step);
+        let link = 2.0 * reach * (1.0 + 1e-9) + 2.0 * merge;
+        let cells: Vec<[[i64; 3]; 2]> = (0..16).map(|x| [[x * 8, 0, 0], [x * 8 + 8, 8, 8]]).collect();
+        let blocks = Blocks::from_cells(1.0, cells);
+        let halo = HALO_STEPS * step;
+        let mut rng = crate::rng::Rng::new(7);
+        let mut pieces = vec![];
+        let mut x = 0.5;
+        while x < 127.0 {
+            let (y, z) = (rng.range(3.0, 4.0), rng.range(3.0, 4.0));
+            let v: Vec<DVec3> = (0..4).map(|i| DVec3::new(x + step * i as f64, y, z)).collect();
+            for (b, block) in blocks.list.iter().enumerate() {
+                for piece in cut(&v, false, block, |p| blocks.find(p, halo) == Some(b as u32)) {
+                    pieces.push(Held { id: pieces.len() as u64, block: b as u32, piece });
+                }
+            }
+            x += 1.2;
+        }
+        let (axis, slabs) = blocks.slabs();
+        let sweep_all = |mut sweep: Sweep| {
+            let (mut clusters, mut most) = (vec![], 0);
+            for (k, slab) in slabs.iter().enumerate() {
+                let held: Vec<Held> = pieces.iter().filter(|h| slab.contains(&h.block)).cloned().collect();
+                let beyond = slabs.get(k + 1).map_or(f64::INFINITY, |next| blocks.reach_below(next, axis, halo));
+                clusters.extend(sweep.add(held, beyond));
+                most = most.max(sweep.front.iter().map(|(h, _)| h.piece.v.len()).sum::<usize>());
+            }
+            (clusters, most, sweep.cuts())
+        };
+        let vertices = |c: &[Held]| c.iter().map(|h| h.piece.v.len()).sum::<usize>();
+        let all = vertices(&pieces);
+        let (whole, most_whole, cuts) = sweep_all(Sweep::new(axis, join, link));
+        assert_eq!((whole.len(), cuts), (1, 0), "the thicket must be one cluster for this to say anything");
+        assert!(most_whole > all * 3 / 4, "held {most_whole} of {all} vertices");
+
+        let bound = 60;
+        let (parts, most, cuts) = sweep_all(Sweep::new(axis, join, link).bounded(bound));
+        // (A slab of this thicket holds about 30 vertices: the bound, and what came since the
+        // last cut, stay held.)
+        let slab_vertices = pieces.iter().filter(|h| slabs[1].contains(&h.block)).map(|h| h.piece.v.len()).sum::<usize>();
+        eprintln!("{cuts} cuts, at most {most} vertices held of {all}, a slab {slab_vertices}");
+        assert!(cuts >= 5 && parts.len() as u64 == cuts + 1, "{cuts} cuts, {} clusters", parts.len());
+        assert!(most <= bound + 2 * slab_vertices, "held {most} vertices of {all}, bound {bound}");
+        assert!(parts.iter().all(|c| vertices(c) <= bound + 2 * slab_vertices));
+        let mut ids: Vec<u64> = parts.iter().flatten().map(|h| h.id).collect();
+        ids.sort();
+        assert_eq!(ids, (0..pieces.len() as u64).collect::<Vec<_>>(), "every piece handed on once");
     }
 }

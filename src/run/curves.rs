@@ -414,6 +414,7 @@ impl Run<'_> {
             bar.inc(1);
         }
         debug_assert_eq!(sweep.held(), 0);
+        counts.clusters_cut = sweep.cuts();
         if !batch.groups.is_empty() || batch.written == 0 {
             self.finish_batch(&mut batch, &corners, &cp, blocks, origin, r, outside, counts)?;
         }

@@ -423,6 +423,13 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
     let Some((batches, counts, seconds)) = run.curves(&r, &outside)? else {
         return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
     };
+    if counts.clusters_cut > 0 {
+        warnings.push(format!(
+            "{} clusters of pieces of polylines held more than {} vertices and were cut where the curve stage's sweep had passed them: curves across such a cut may come out in two",
+            counts.clusters_cut,
+            crate::extract::sweep::MAX_CLUSTER_VERTICES
+        ));
+    }
     let curves = run.finished_curves(batches);
     let shapes = ShapeCounts::of(&curves)?;
     let t = Instant::now();
