@@ -996,8 +996,8 @@ mod tests {
             assert!(mean.abs() < 0.1 * noise, "{phi} degrees: edge points {:.2} noise radii off the edge on average", mean / noise);
         }
         // A fillet as wide as the ball between faces at 90 degrees: a quadric follows it, and
-        // splitting that into planes meeting at about 55 degrees would put an edge on it (532
-        // edge points of 1112 candidates without LONE_CURVED_MAX_DEG; 257 with no split).
+        // splitting that into planes meeting at about 55 degrees would put an edge on it (530
+        // edge points of 1112 candidates without LONE_CURVED_MAX_DEG, 298 with it).
         let (n, candidates) = fillet_edges(0.12, noise, radius);
         assert!(n * 3 <= candidates, "{n} edge points from {candidates} candidates on the fillet");
     }
