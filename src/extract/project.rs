@@ -1015,7 +1015,8 @@ mod tests {
                 (0..3000).map(|_| side(rng.range(0.0, 0.3), rng.f64() < 0.5) + DVec3::new(0.0, rng.range(-0.3, 0.3), 0.0) + rng.in_ball(noise)).collect()
             };
             // (Face a is z = 0, x < 0; face b leaves the line at `interior` degrees from it.)
-            let crease = |interior: f64| move |u: f64, a: bool| if a { DVec3::new(-u, 0.0, 0.0) } else { DVec3::new(-interior.cos(), 0.0, -interior.sin()) * u };
+            let crease =
+                |interior: f64| move |u: f64, a: bool| if a { DVec3::new(-u, 0.0, 0.0) } else { DVec3::new(-interior.cos(), 0.0, -interior.sin()) * u };
             assert!(reaches(&sample(&crease(90f64.to_radians()))), "seed {seed}: 90 degree crease");
             assert!(reaches(&sample(&crease(145f64.to_radians()))), "seed {seed}: 35 degree crease");
             // (u runs from the arc's middle along the arc, then on along a face.)
@@ -1044,7 +1045,8 @@ mod tests {
             u if u < 1.0 + arc => DVec3::new(r * ((u - 1.0) / r).sin(), 0.0, r * ((u - 1.0) / r).cos() - r),
             u => DVec3::new(r, 0.0, -r - (u - 1.0 - arc)),
         };
-        let world: Vec<DVec3> = (0..40_000).map(|_| on_profile(rng.range(0.0, 2.0 + arc)) + DVec3::new(0.0, rng.range(0.0, 2.0), 0.0) + rng.in_ball(noise)).collect();
+        let world: Vec<DVec3> =
+            (0..40_000).map(|_| on_profile(rng.range(0.0, 2.0 + arc)) + DVec3::new(0.0, rng.range(0.0, 2.0), 0.0) + rng.in_ball(noise)).collect();
         let cloud = Cloud::new(&world);
         let mid = on_profile(1.0 + arc / 2.0);
         let near = |i: u32| {
