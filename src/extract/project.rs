@@ -550,7 +550,7 @@ fn split_lone_surface(lone: &Surface, pts: &[DVec3], min_threshold: f64) -> Opti
     if !significant(plane_rss, split.rss, n) || !split.crease_rather_than(curved_rss) {
         return None;
     }
-    if !lone.quad.is_plane() && split.normals[0].dot(split.normals[1]).abs() < LONE_CURVED_MAX_DEG.to_radians().cos() {
+    if !lone.quad.is_plane() && split.cos_between() < LONE_CURVED_MAX_DEG.to_radians().cos() {
         return None;
     }
     let orient = lone.quad.frame.n;
@@ -575,7 +575,12 @@ impl TwoPlanes {
     /// points clearly better than a curved surface whose residual sum of squares is
     /// `curved_rss` (see [`CREASE_RATIO`]).
     fn crease_rather_than(&self, curved_rss: f64) -> bool {
-        self.rss < CREASE_RATIO * curved_rss && self.normals[0].dot(self.normals[1]).abs() <= CREASE_SPLIT_DEG.to_radians().cos()
+        self.rss < CREASE_RATIO * curved_rss && self.cos_between() <= CREASE_SPLIT_DEG.to_radians().cos()
+    }
+
+    /// The cosine of the angle at which the planes meet.
+    fn cos_between(&self) -> f64 {
+        self.normals[0].dot(self.normals[1]).abs()
     }
 }
 
@@ -1019,18 +1024,22 @@ mod tests {
                 |interior: f64| move |u: f64, a: bool| if a { DVec3::new(-u, 0.0, 0.0) } else { DVec3::new(-interior.cos(), 0.0, -interior.sin()) * u };
             assert!(reaches(&sample(&crease(90f64.to_radians()))), "seed {seed}: 90 degree crease");
             assert!(reaches(&sample(&crease(145f64.to_radians()))), "seed {seed}: 35 degree crease");
-            // (u runs from the arc's middle along the arc, then on along a face.)
+            // (u runs from the arc's middle along the profile; the tangent planes meet at x = r.)
             let (r, arc) = (4.0 * noise, std::f64::consts::FRAC_PI_2 * 4.0 * noise);
-            let fillet = |u: f64, a: bool| {
-                let t = std::f64::consts::FRAC_PI_4 + if a { u / r } else { -u / r };
-                let beyond = u - arc / 2.0;
-                match (beyond > 0.0, a) {
-                    (false, _) => DVec3::new(-r + r * t.cos(), 0.0, -r + r * t.sin()),
-                    (true, true) => DVec3::new(-r - beyond, 0.0, 0.0),
-                    (true, false) => DVec3::new(0.0, 0.0, -r - beyond),
-                }
-            };
+            let fillet = |u: f64, a: bool| fillet_profile(r, 1.0 + arc / 2.0 + if a { -u } else { u }) - DVec3::new(r, 0.0, 0.0);
             assert!(!reaches(&sample(&fillet)), "seed {seed}: the fillet's tangent planes");
+        }
+    }
+
+    /// The point at arc length `u` along the profile (in the xz plane) of faces z = 0 (x from -1
+    /// to 0) and x = r (z from -r down), joined by a fillet of radius `r`, whose tangent planes
+    /// meet at x = r, z = 0.
+    fn fillet_profile(r: f64, u: f64) -> DVec3 {
+        let arc = std::f64::consts::FRAC_PI_2 * r;
+        match u {
+            u if u < 1.0 => DVec3::new(u - 1.0, 0.0, 0.0),
+            u if u < 1.0 + arc => DVec3::new(r * ((u - 1.0) / r).sin(), 0.0, r * ((u - 1.0) / r).cos() - r),
+            u => DVec3::new(r, 0.0, -r - (u - 1.0 - arc)),
         }
     }
 
@@ -1040,11 +1049,7 @@ mod tests {
     fn fillet_edges(r: f64, noise: f64, radius: f64) -> (usize, usize) {
         let mut rng = Rng::stream(7, 0);
         let arc = std::f64::consts::FRAC_PI_2 * r;
-        let on_profile = |u: f64| match u {
-            u if u < 1.0 => DVec3::new(-u, 0.0, 0.0),
-            u if u < 1.0 + arc => DVec3::new(r * ((u - 1.0) / r).sin(), 0.0, r * ((u - 1.0) / r).cos() - r),
-            u => DVec3::new(r, 0.0, -r - (u - 1.0 - arc)),
-        };
+        let on_profile = |u: f64| fillet_profile(r, u);
         let world: Vec<DVec3> =
             (0..40_000).map(|_| on_profile(rng.range(0.0, 2.0 + arc)) + DVec3::new(0.0, rng.range(0.0, 2.0), 0.0) + rng.in_ball(noise)).collect();
         let cloud = Cloud::new(&world);
