@@ -331,13 +331,14 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
         return out;
     }
     let wedge = Wedge::at(e, &surfaces[0].quad, &surfaces[1].quad);
-    if wedge.crease_angle() < p.min_angle_deg {
+    let crease = wedge.crease_angle();
+    if crease < p.min_angle_deg {
         return out;
     }
-    if lone_split && wedge.crease_angle() > LONE_SPLIT_MAX_DEG {
+    if lone_split && crease > LONE_SPLIT_MAX_DEG {
         return out;
     }
-    if wedge.crease_angle() <= ON_DATA_MAX_DEG && !reaches_the_edge(&s.pts, e, wedge.t, ON_DATA_NOISE * p.noise, p.radius / 2.0) {
+    if crease <= ON_DATA_MAX_DEG && !reaches_the_edge(&s.pts, e, wedge.t, ON_DATA_NOISE * p.noise, p.radius / 2.0) {
         return out;
     }
     out.edge = Some(EdgePoint { p: e, n: wedge.normals() });
