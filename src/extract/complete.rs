@@ -115,7 +115,7 @@ pub fn complete(mut curves: Vec<Curve>, corners: &[DVec3], p: &CompleteParams, c
     if cancel.is_set() {
         return curves;
     }
-    resolve_corners(&mut curves, p.corner_zone);
+    resolve_corners(&mut curves, p.corner_zone, corners);
     let min_len = p.min_steps * p.step;
     curves.retain(|c| {
         let free = |k: usize| !c.corner[k];
@@ -444,15 +444,22 @@ const LINE_MISS: f64 = 0.15;
 /// follows between one and two zones out, where its edge points saw two surfaces only. With
 /// two or more such lines fixing a point within `zone` of the corner, each passing within
 /// [`LINE_MISS`] zones of it, the corner moves there and the straight ends drop their vertices
-/// inside the zone, running straight into it. A curved end (a small hole's rim, say) neither
-/// gives a line nor is straightened, and a corner of only two curves is left where it is: it
-/// is a bend, or a join that completion made, and two lines always nearly meet somewhere.
-fn resolve_corners(curves: &mut [Curve], zone: f64) {
+/// inside the zone, running straight into it. With one such line, at a corner the projection
+/// stage `found` from three surfaces (a straight edge meeting the rims of a boss or a hole),
+/// the corner moves onto the line, as near as it can to where it was: the line fixes it
+/// across, the curved ends say nothing more. A corner completion made (where an end split a
+/// curve, or two ends met) is left off the line: it is pinned by the curve it split, and moved
+/// onto the line of a false curve joining that curve, it would leave it. A curved end (a small
+/// hole's rim, say) neither gives a line nor is straightened, and a corner of only two curves
+/// is left where it is: it is a bend, or a join that completion made, and two lines always
+/// nearly meet somewhere.
+fn resolve_corners(curves: &mut [Curve], zone: f64, found: &[DVec3]) {
     if zone <= 0.0 {
         return;
     }
     // The curve ends at each corner, keyed by the corner's exact position (shared vertices).
     let key = |q: DVec3| [q.x.to_bits(), q.y.to_bits(), q.z.to_bits()];
+    let found: std::collections::BTreeSet<[u64; 3]> = found.iter().map(|&q| key(q)).collect();
     let mut at: std::collections::BTreeMap<[u64; 3], Vec<(usize, usize)>> = Default::default();
     for (ci, c) in curves.iter().enumerate() {
         if c.closed || c.v.len() < 2 {
@@ -480,9 +487,14 @@ fn resolve_corners(curves: &mut [Curve], zone: f64) {
             b += m * mean;
             straight.push((ci, e, mean, d));
         }
+        // One straight end fixes the corner across its line only: it moves onto that line.
         // (Nearly parallel lines, such as two curves running straight through, fix no point.)
-        let solved = a.inverse() * b;
-        if straight.len() < 2 || a.determinant().abs() <= 1e-3 || !solved.is_finite() || solved.distance(q) > zone {
+        let solved = match straight[..] {
+            [_] if !found.contains(&k) => continue,
+            [(_, _, mean, d)] => mean + (q - mean).project_onto_normalized(d),
+            _ => a.inverse() * b,
+        };
+        if straight.is_empty() || (straight.len() > 1 && a.determinant().abs() <= 1e-3) || !solved.is_finite() || solved.distance(q) > zone {
             continue;
         }
         if straight.iter().any(|&(_, _, mean, d)| (solved - mean).reject_from_normalized(d).length() > LINE_MISS * zone) {
@@ -595,7 +607,7 @@ mod tests {
     fn a_corner_is_resolved_from_the_curves_outside_its_zone() {
         let q = DVec3::new(0.15, 0.1, 0.05);
         let mut curves = vec![arm(q, DVec3::X, DVec3::Y, 0.5), arm(q, DVec3::Y, DVec3::Z, 0.5), arm(q, DVec3::Z, DVec3::X, 0.5)];
-        resolve_corners(&mut curves, 0.5);
+        resolve_corners(&mut curves, 0.5, &[]);
         for c in &curves {
             assert!(c.v[0].length() < 1e-9, "corner at {:?}", c.v[0]);
             assert!(c.corner[0] && !c.corner[1]);
@@ -619,10 +631,45 @@ mod tests {
         rim.corner[0] = true;
         let before = rim.v[1..].to_vec();
         let mut curves = vec![arm(q, DVec3::X, DVec3::Z, 0.5), arm(q, DVec3::Y, DVec3::Z, 0.5), rim];
-        resolve_corners(&mut curves, 0.5);
+        resolve_corners(&mut curves, 0.5, &[]);
         assert!(curves[0].v[0].length() < 1e-9 && curves[2].v[0] == curves[0].v[0]);
         assert_eq!(curves[2].v[1..], before[..]);
         assert_eq!(curves[0].v.len(), 27);
+    }
+
+    #[test]
+    fn a_found_corner_of_one_straight_end_moves_onto_its_line() {
+        // A straight arm along the x axis and two rims of radius 1 (two zones) leaving along y
+        // and along z and curving back over -x; the corner lies 0.2 off the arm's line. It
+        // moves onto the line, keeping its place along it; the rims are not straightened.
+        let q = DVec3::new(-0.05, 0.12, 0.16);
+        let rim = |out: DVec3| {
+            let mut v = vec![q];
+            v.extend((1..=30).map(|k| {
+                let t = k as f64 * 0.1;
+                out * t.sin() - DVec3::X * (1.0 - t.cos())
+            }));
+            let mut c = Curve::new(v, false);
+            c.corner[0] = true;
+            c
+        };
+        let (ry, rz) = (rim(DVec3::Y), rim(DVec3::Z));
+        let before = [ry.v[1..].to_vec(), rz.v[1..].to_vec()];
+        let mut curves = vec![arm(q, DVec3::X, DVec3::Y, 0.0), ry, rz];
+        // A corner completion made (not one the projection found) stays where it is.
+        let mut made = curves.clone();
+        resolve_corners(&mut made, 0.5, &[]);
+        assert_eq!(made, curves);
+        resolve_corners(&mut curves, 0.5, &[q]);
+        let moved = curves[0].v[0];
+        assert!(moved.distance(DVec3::new(-0.05, 0.0, 0.0)) < 1e-9, "corner at {moved:?}");
+        assert!(curves.iter().all(|c| c.v[0] == moved && c.corner[0]));
+        assert_eq!(curves[1].v[1..], before[0][..]);
+        assert_eq!(curves[2].v[1..], before[1][..]);
+        // Without the straight arm, nothing fixes the corner: it stays.
+        let mut rims = vec![rim(DVec3::Y), rim(DVec3::Z), rim(-DVec3::Y)];
+        resolve_corners(&mut rims, 0.5, &[q]);
+        assert!(rims.iter().all(|c| c.v[0] == q));
     }
 
     #[test]
@@ -716,7 +763,7 @@ mod tests {
         // meet there.
         let q = DVec3::new(0.15, 0.1, 0.05);
         let mut curves = vec![arm(q, DVec3::X, DVec3::Y, 0.5), arm(q, DVec3::Y, DVec3::Z, 0.5)];
-        resolve_corners(&mut curves, 0.5);
+        resolve_corners(&mut curves, 0.5, &[]);
         assert!(curves.iter().all(|c| c.v[0] == q && c.v.len() == 31));
         // Three arms, one of them shifted 0.3 (0.6 zones) sideways: no point lies within 0.15
         // zones of all three lines.
@@ -724,7 +771,7 @@ mod tests {
         for v in curves[2].v.iter_mut().skip(1) {
             *v += DVec3::new(0.0, 0.3, 0.0);
         }
-        resolve_corners(&mut curves, 0.5);
+        resolve_corners(&mut curves, 0.5, &[]);
         assert!(curves.iter().all(|c| c.v[0] == q && c.v.len() == 31));
     }
 
@@ -786,7 +833,7 @@ mod tests {
         // Two curves running straight through: parallel lines fix no point.
         let q = DVec3::new(0.0, 0.05, 0.0);
         let mut curves = vec![arm(q, DVec3::X, DVec3::Y, 0.0), arm(q, -DVec3::X, DVec3::Y, 0.0)];
-        resolve_corners(&mut curves, 0.5);
+        resolve_corners(&mut curves, 0.5, &[]);
         assert!(curves.iter().all(|c| c.v[0] == q));
     }
 }
