@@ -490,11 +490,13 @@ fn resolve_corners(curves: &mut [Curve], zone: f64, found: &[DVec3]) {
         // One straight end fixes the corner across its line only: it moves onto that line.
         // (Nearly parallel lines, such as two curves running straight through, fix no point.)
         let solved = match straight[..] {
+            [] => continue,
             [_] if !found.contains(&k) => continue,
             [(_, _, mean, d)] => mean + (q - mean).project_onto_normalized(d),
+            _ if a.determinant().abs() <= 1e-3 => continue,
             _ => a.inverse() * b,
         };
-        if straight.is_empty() || (straight.len() > 1 && a.determinant().abs() <= 1e-3) || !solved.is_finite() || solved.distance(q) > zone {
+        if !solved.is_finite() || solved.distance(q) > zone {
             continue;
         }
         if straight.iter().any(|&(_, _, mean, d)| (solved - mean).reject_from_normalized(d).length() > LINE_MISS * zone) {
