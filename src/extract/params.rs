@@ -159,7 +159,8 @@ pub fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
     let noise = |x: f64| if x < spacing * 2f64.powi(-26) { 0.0 } else { settle(x) };
     let mut r = params.resolve(spacing, noise(median(&mut n)));
     r.surface_noise = noise(quantile(&mut n, 0.25));
-    let count = median(&mut d) * std::f64::consts::PI * r.fit_radius.powi(2);
+    // (Settled as the spacing is: the share of points kept must be the same in any tiling.)
+    let count = settle(median(&mut d)) * std::f64::consts::PI * r.fit_radius.powi(2);
     r.keep = if count > 0.0 { (TARGET_NEIGHBOURS / count).min(1.0) } else { 1.0 };
     if r.keep >= 0.7 {
         r.keep = 1.0;
