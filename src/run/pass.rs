@@ -98,6 +98,9 @@ pub struct Loading<'a> {
     pub halo: f64,
     /// Share of points kept (1: all).
     pub keep: f64,
+    /// Share of the kept core points flagged for evaluation (1: all; see
+    /// [`Resolved::evaluate`](crate::extract::Resolved::evaluate)).
+    pub evaluate: f64,
     /// Seed of the thinning.
     pub seed: u64,
     /// Quantum of the position keys.
@@ -107,11 +110,14 @@ pub struct Loading<'a> {
 }
 
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by position key); the
-/// flags say which points are core.
+/// flags say which points are core points to evaluate (the share `evaluate` of the core's,
+/// by another draw from the position key).
 pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoints, Vec<bool>)> {
     let core = grid.core(t);
     let (halo, keep) = (l.halo, l.keep);
     let kept = |p| keep >= 1.0 || keep_point(position_key(p, l.key_quantum), keep, l.seed);
+    // (A key of its own, so that which points are evaluated does not follow which are kept.)
+    let evaluated = |p| l.evaluate >= 1.0 || keep_point(position_key(p, l.key_quantum) ^ 0xE7A1_0A7E, l.evaluate, l.seed);
     let mut tp = TilePoints::default();
     let mut is_core = vec![];
     for n in grid.around(t, halo) {
@@ -126,7 +132,8 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
         } else {
             store.read_near(n, Some((&core, halo)), &mut tp, |p, _| within(&core, halo, p) && kept(p))?;
         }
-        is_core.extend(std::iter::repeat_n(n == t, tp.xyz.len() - before));
+        let own = n == t;
+        is_core.extend(tp.xyz[before..].iter().map(|&p| own && evaluated(p)));
     }
     Ok((tp, is_core))
 }

@@ -59,6 +59,36 @@ fn tile_independence() {
     }
 }
 
+/// Evaluating stages 1 and 2 at a share of the points (`--evaluate-per-fit`) picks the same
+/// points in any tiling: a noisy cube at 1 tile and at 8 and 27 gives the same parameters, tau
+/// to the bit and the same curves, and evaluates only about the share asked for.
+#[test]
+fn a_share_of_the_points_evaluated_is_the_same_in_any_tiling() {
+    let d = tempfile::tempdir().unwrap();
+    let input = vec![fixture("cube_noise005.las")];
+    let params = Params { evaluate_per_fit: Some(10.0), ..Params::default() };
+    let one = run_extract(&input, &d.path().join("one"), &params, &Filter::default(), &opts(Some(10.0))).unwrap();
+    let share = one.params.evaluate;
+    let evaluated = one.counts.evaluated as f64 / one.counts.points as f64;
+    eprintln!("share {share:.3}, evaluated {evaluated:.3}, {} candidates", one.counts.candidates);
+    assert!(share > 0.2 && share < 0.6, "share {share}");
+    assert!((evaluated - share).abs() < 0.03, "evaluated {evaluated} of the points at share {share}");
+    let ref_curves = read_obj(&d.path().join("one/curves.obj")).unwrap();
+    let kappa = one.params.kappa;
+    for size in [0.5, 0.34] {
+        let out = d.path().join(format!("t{size}"));
+        let r = run_extract(&input, &out, &params, &Filter::default(), &opts(Some(size))).unwrap();
+        let c = read_obj(&out.join("curves.obj")).unwrap();
+        assert!(r.tiles >= 8, "{} tiles", r.tiles);
+        assert_eq!(r.params, one.params, "resolved parameters with {} tiles: {:?} vs {:?}", r.tiles, r.params, one.params);
+        assert_eq!(r.counts.evaluated, one.counts.evaluated, "points evaluated with {} tiles", r.tiles);
+        assert_eq!(r.tau.to_bits(), one.tau.to_bits(), "tau with {} tiles", r.tiles);
+        assert_eq!(c.len(), ref_curves.len(), "curve count with {} tiles", r.tiles);
+        let (ab, ba) = (directed(&c, &ref_curves), directed(&ref_curves, &c));
+        assert!(ab <= 0.5 * kappa && ba <= 0.5 * kappa, "{} tiles: {ab} / {ba} vs kappa {kappa}", r.tiles);
+    }
+}
+
 /// Polylines cut at the borders of the curve stage's growth blocks are stitched back without a
 /// trace: blocks of 16 steps (6 to 22 of them on these fixtures) give the curves of one block
 /// holding the whole cloud, in number, and every vertex within half a spacing of the other's
