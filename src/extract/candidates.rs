@@ -55,7 +55,8 @@ pub struct TileResiduals {
 }
 
 /// Stage 1 for one tile: the residual of every core point of `cloud` (`is_core` flags the
-/// points in the order the tile was loaded), with the parameters `r`.
+/// points in the order the tile was loaded: the core points to evaluate, all of them unless
+/// [`Resolved::evaluate`] is below 1), with the parameters `r`.
 pub fn tile_residuals(cloud: &Cloud, is_core: &[bool], r: &Resolved) -> TileResiduals {
     let which = cloud.core_points(is_core);
     let residual = residuals(cloud, &which, r.fit_radius, r.halo(), r.noise_limited());

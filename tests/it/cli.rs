@@ -107,3 +107,18 @@ fn working_data_goes_to_the_work_dir_and_clean_removes_it() {
     stdout(&["extract", cube, "-o", &p("moved"), "-q", "--min-confidence", "0.3"]);
     assert!(stdout(&["status", &p("moved")]).contains("finished"));
 }
+
+/// Method lengths and `--evaluate-per-fit` that are not positive numbers are refused before
+/// anything is written, with the option named.
+#[test]
+fn method_parameters_that_are_not_positive_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let cube = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las");
+    let out = d.path().join("run");
+    for (option, value) in [("--evaluate-per-fit", "0"), ("--evaluate-per-fit", "nan"), ("--kappa", "0"), ("--step", "inf")] {
+        let (code, err) = run(&["extract", cube.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q", option, value]);
+        assert_eq!(code, Some(crease::error::exit::USAGE), "{option} {value}: {err}");
+        assert!(err.contains(&format!("{option} must be a positive number")), "{option} {value}: {err}");
+        assert!(!out.exists(), "{option} {value}: the run directory was created");
+    }
+}
