@@ -278,7 +278,7 @@ impl<'a> NearEdges<'a> {
     }
 
     /// The mean normal pair of the edge points within half a step of `p`, if any, oriented as
-    /// most of those points orient theirs (see [`Orientation`]).
+    /// most of those points orient theirs (see `Orientation`).
     pub fn normals_at(&self, p: DVec3) -> Option<[DVec3; 2]> {
         let own = self.own_pairs_at(p, &mut vec![]);
         let first = *own.first()?;
@@ -355,7 +355,7 @@ impl Gathered {
 
 /// The curve `c` with what was gathered along it, made into the output polyline `id` (world
 /// coordinates, from positions relative to `origin`): the normals take the orientation most
-/// of its vertices have (see [`Orientation`]), vertices without normals take their
+/// of its vertices have (see `Orientation`), vertices without normals take their
 /// neighbours', and the evidence gives the confidence.
 pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
     // Each normal is aligned with the one before it along the curve, so that it turns smoothly
