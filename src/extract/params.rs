@@ -56,6 +56,11 @@ pub struct Resolved {
     /// a cost in recall where features are weak or thin (measured in the README).
     #[serde(default = "every_point")]
     pub evaluate: f64,
+    /// Radius of the ball over which each point kept of a thinned cloud is averaged (0: the
+    /// points as they are): it is moved to the mean of every point within it, kept or not, so
+    /// that the points dropped still narrow the noise (see [`AVERAGE_NOISE`]).
+    #[serde(default)]
+    pub average: f64,
     /// Candidate fit radius.
     pub fit_radius: f64,
     /// Robust projection radius.
@@ -90,6 +95,20 @@ pub const DEFAULT_SEED: u64 = 1;
 pub const TARGET_NEIGHBOURS: f64 = 150.0;
 /// The default length unit is at least this many noise deviations.
 pub const NOISE_SCALE: f64 = 1.5;
+/// Radius, in noise deviations, of the ball over which each point kept of a thinned cloud is
+/// averaged (see [`Resolved::average`]). Thinning to [`TARGET_NEIGHBOURS`] a fit drops most of
+/// a noisy cloud (96 % of fandisk at 0.02 dB); averaging lets the points dropped narrow the
+/// noise of those kept instead. A ball narrower than the noise's spread across the surface
+/// (a uniform ball of radius R deviates by R / sqrt(5)) leans towards its own point's side, so
+/// it narrows the noise less than its count of points would; a wider one rounds a crease by
+/// about its radius. Over the quality table
+/// (seed 1, the dB rows, against no averaging): radius 2 raised mean recall at 0.005 / 0.01 /
+/// 0.02 dB 0.964 / 0.818 / 0.671 -> 0.971 / 0.880 / 0.725 and precision 0.984 / 0.864 / 0.750
+/// -> 0.984 / 0.892 / 0.796, and lowered the mean distance on almost every cloud (cube at
+/// 0.01 0.00099 -> 0.00063 dB); radius 3 raised recall more (0.971 / 0.903 / 0.747) but moved
+/// the edge points off the truth where features are sharp and close (anchor at 0.01 mean
+/// 0.0025 -> 0.0032 dB, cylinder at 0.005 0.00054 -> 0.00091).
+pub const AVERAGE_NOISE: f64 = 2.0;
 
 impl Resolved {
     /// The halo a tile needs around its core for stages 1-2: the widest neighbourhood they
@@ -143,6 +162,7 @@ impl Params {
             scale,
             keep: 1.0,
             evaluate: 1.0,
+            average: 0.0,
             fit_radius: self.fit_radius.unwrap_or(6.0 * scale),
             rmls_radius: rmls,
             min_threshold: 0.05 * scale,
@@ -181,6 +201,9 @@ pub fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
     if r.keep >= 0.7 {
         r.keep = 1.0;
     }
+    if r.keep < 1.0 {
+        r.average = AVERAGE_NOISE * r.noise;
+    }
     let kept = count * r.keep;
     if let Some(per_fit) = params.evaluate_per_fit
         && kept > per_fit
@@ -217,5 +240,16 @@ mod tests {
         assert!((held - TARGET_NEIGHBOURS).abs() < 1e-6 * TARGET_NEIGHBOURS, "{held}");
         assert!((noisy.evaluate - 40.0 / TARGET_NEIGHBOURS).abs() < 1e-9, "{}", noisy.evaluate);
         assert_eq!(resolve(&Params::default(), &stats(1.0, 3.0, density)).evaluate, 1.0);
+    }
+
+    /// Only a thinned cloud's kept points are averaged, over [`AVERAGE_NOISE`] deviations.
+    #[test]
+    fn only_a_thinned_cloud_is_averaged() {
+        let density = 2f64.ln() / std::f64::consts::PI;
+        let clean = resolve(&Params::default(), &stats(1.0, 0.0, density));
+        assert_eq!((clean.keep, clean.average), (1.0, 0.0));
+        let noisy = resolve(&Params::default(), &stats(1.0, 3.0, density));
+        assert!(noisy.keep < 1.0);
+        assert_eq!(noisy.average, AVERAGE_NOISE * noisy.noise);
     }
 }

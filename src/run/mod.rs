@@ -874,7 +874,7 @@ impl<'a> Run<'a> {
         drop(probe);
         let total: u64 = tile_points.iter().sum();
         let seed = params.seed.unwrap_or(crate::extract::params::DEFAULT_SEED);
-        let loading = |halo| Loading { halo, keep: 1.0, evaluate: 1.0, seed, key_quantum: self.kq, counts: tile_points };
+        let loading = |halo| Loading { halo, keep: 1.0, evaluate: 1.0, seed, key_quantum: self.kq, counts: tile_points, average: 0.0 };
         let halo0 = 24.0 * kappa0;
         // (The pool has little to do here but wait for the next tile, so the tile is indexed
         // on the pool, not on the loader thread as in the passes below.)
@@ -906,7 +906,8 @@ impl<'a> Run<'a> {
     /// How the residual and projection passes load a tile: the same way in both, so that the
     /// residuals come back in the cloud's order.
     fn cloud_loading(&self, r: &Resolved) -> Loading<'_> {
-        Loading { halo: r.halo(), keep: r.keep, evaluate: r.evaluate, seed: r.seed, key_quantum: self.kq, counts: &self.manifest.tile_points }
+        let (halo, keep, average) = (r.halo(), r.keep, r.average);
+        Loading { halo, keep, evaluate: r.evaluate, seed: r.seed, key_quantum: self.kq, counts: &self.manifest.tile_points, average }
     }
 
     /// Residual pass (stage 1); returns tau, the mean residual over all points (an exact sum:

@@ -11,6 +11,7 @@ use crate::points::TilePoints;
 use crate::progress::Progress;
 use crate::tiles::{within, Grid, Store};
 use crate::workspace::Workspace;
+use glam::DVec3;
 use std::time::Instant;
 
 /// Seconds a tile pass spent loading tiles (reading the store, building the cloud: on the
@@ -107,20 +108,25 @@ pub struct Loading<'a> {
     pub key_quantum: f64,
     /// Points bucketed into each tile: a tile's store must hold them all.
     pub counts: &'a [u64],
+    /// Radius over which each kept point is averaged when the cloud is thinned (0: none; see
+    /// [`Resolved::average`](crate::extract::Resolved::average)).
+    pub average: f64,
 }
 
-/// Loads tile `t`'s core and the halo around it (thinned to share `keep` by position key); the
+/// Loads tile `t`'s core and the halo around it (thinned to share `keep` by position key, each
+/// point kept averaged over the ball of radius `average` around it if that is not 0); the
 /// flags say which points are core points to evaluate (the share `evaluate` of the core's,
 /// by another draw from the position key).
 pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoints, Vec<bool>)> {
     let core = grid.core(t);
     let (halo, keep) = (l.halo, l.keep);
-    let kept = |p| keep >= 1.0 || keep_point(position_key(p, l.key_quantum), keep, l.seed);
-    // (A key of its own, so that which points are evaluated does not follow which are kept.)
-    let evaluated = |p| l.evaluate >= 1.0 || keep_point(position_key(p, l.key_quantum) ^ 0xE7A1_0A7E, l.evaluate, l.seed);
+    let averaged = l.average > 0.0 && keep < 1.0;
+    // The points within `average` of a point of the halo are read too, all of them.
+    let reach = if averaged { halo + l.average } else { halo };
+    let kept = |p| averaged || keep >= 1.0 || keep_point(position_key(p, l.key_quantum), keep, l.seed);
     let mut tp = TilePoints::default();
-    let mut is_core = vec![];
-    for n in grid.around(t, halo) {
+    let mut own = 0..0;
+    for n in grid.around(t, reach) {
         let before = tp.xyz.len();
         if n == t {
             let held = store.read(n, &mut tp, |p, _| kept(p))?;
@@ -129,13 +135,81 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
                 // (A deleted or truncated tile file once dropped its points without a word.)
                 return Err(Error::damaged(store.path(t), format!("holds {held} of the {bucketed} points bucketed into it")));
             }
+            own = before..tp.xyz.len();
         } else {
-            store.read_near(n, Some((&core, halo)), &mut tp, |p, _| within(&core, halo, p) && kept(p))?;
+            store.read_near(n, Some((&core, reach)), &mut tp, |p, _| within(&core, reach, p) && kept(p))?;
         }
-        let own = n == t;
-        is_core.extend(tp.xyz[before..].iter().map(|&p| own && evaluated(p)));
     }
-    Ok((tp, is_core))
+    let is_core = |k: usize, p: DVec3| {
+        // (A key of its own, so that which points are evaluated does not follow which are kept.)
+        own.contains(&k) && (l.evaluate >= 1.0 || keep_point(position_key(p, l.key_quantum) ^ 0xE7A1_0A7E, l.evaluate, l.seed))
+    };
+    if !averaged {
+        let flags = tp.xyz.iter().enumerate().map(|(k, &p)| is_core(k, p)).collect();
+        return Ok((tp, flags));
+    }
+    let balls = Balls::new(&tp.xyz, l.average, l.key_quantum);
+    let (mut out, mut flags) = (TilePoints::default(), vec![]);
+    for (k, &p) in tp.xyz.iter().enumerate() {
+        if (own.contains(&k) || within(&core, halo, p)) && keep_point(position_key(p, l.key_quantum), keep, l.seed) {
+            out.xyz.push(balls.mean_around(p));
+            out.gid.push(tp.gid[k]);
+            flags.push(is_core(k, p));
+        }
+    }
+    Ok((out, flags))
+}
+
+/// Means of the points within a radius of a position, the same to the bit whichever tile
+/// computes them: the points are found by their world positions and summed as integers (in
+/// quanta of the position keys), so neither a tile's origin nor the order of its points
+/// enters.
+struct Balls<'a> {
+    xyz: &'a [DVec3],
+    radius: f64,
+    quantum: f64,
+    /// Point indices by grid cell of side `radius` (z, y, x), so that a ball's points lie in
+    /// nine runs of three cells.
+    by_cell: Vec<([i64; 3], u32)>,
+}
+
+impl<'a> Balls<'a> {
+    fn new(xyz: &'a [DVec3], radius: f64, quantum: f64) -> Balls<'a> {
+        let mut by_cell: Vec<([i64; 3], u32)> = xyz.iter().enumerate().map(|(k, &p)| (Self::cell(p, radius), k as u32)).collect();
+        by_cell.sort_unstable();
+        Balls { xyz, radius, quantum, by_cell }
+    }
+
+    fn cell(p: DVec3, radius: f64) -> [i64; 3] {
+        let c = (p / radius).floor();
+        [c.z as i64, c.y as i64, c.x as i64]
+    }
+
+    /// The mean of the points within the radius of `p`, one of the points.
+    fn mean_around(&self, p: DVec3) -> DVec3 {
+        let c = Self::cell(p, self.radius);
+        let r2 = self.radius * self.radius;
+        let (mut sum, mut count) = ([0i128; 3], 0i128);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                let (z, y) = (c[0] + dz, c[1] + dy);
+                let lo = self.by_cell.partition_point(|e| e.0 < [z, y, c[2] - 1]);
+                let hi = self.by_cell.partition_point(|e| e.0 <= [z, y, c[2] + 1]);
+                for &(_, j) in &self.by_cell[lo..hi] {
+                    let o = self.xyz[j as usize];
+                    if o.distance_squared(p) <= r2 {
+                        let v = (o / self.quantum).round();
+                        sum[0] += v.x as i128;
+                        sum[1] += v.y as i128;
+                        sum[2] += v.z as i128;
+                        count += 1;
+                    }
+                }
+            }
+        }
+        let mean = |s: i128| (s.div_euclid(count) as f64 + s.rem_euclid(count) as f64 / count as f64) * self.quantum;
+        DVec3::new(mean(sum[0]), mean(sum[1]), mean(sum[2]))
+    }
 }
 
 /// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells of side `side`, on
@@ -145,4 +219,31 @@ pub fn load_cloud(store: Store, grid: &Grid, t: u32, l: &Loading, side: f64, idl
     let (tp, core) = load(store, grid, t, l)?;
     let origin = tile_origin(&tp);
     Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, side, idle).cancelled_by(cancel), core))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// A noisy plane's points averaged over balls of twice the noise deviation lie closer to
+    /// the plane than the points do (less so than the count of points in a ball would say: a
+    /// ball narrower than the noise's spread leans towards its own point's side), and each
+    /// mean is the same to the bit whatever the order of the points.
+    #[test]
+    fn ball_means_narrow_the_noise_and_ignore_the_order() {
+        let mut rng = Rng::stream(5, 0);
+        let sigma = 0.05;
+        let mut xyz: Vec<DVec3> = (0..40_000).map(|_| DVec3::new(4.0 * rng.f64(), 4.0 * rng.f64(), sigma * 3f64.sqrt() * (2.0 * rng.f64() - 1.0))).collect();
+        let balls = Balls::new(&xyz, 2.0 * sigma, 1e-9);
+        let at: Vec<DVec3> = xyz.iter().copied().filter(|p| p.x > 1.0 && p.x < 3.0 && p.y > 1.0 && p.y < 3.0).take(500).collect();
+        let means: Vec<DVec3> = at.iter().map(|&p| balls.mean_around(p)).collect();
+        let rms = |v: &[DVec3]| (v.iter().map(|p| p.z * p.z).sum::<f64>() / v.len() as f64).sqrt();
+        assert!(rms(&means) < 0.75 * rms(&at), "{} vs {}", rms(&means), rms(&at));
+        xyz.reverse();
+        let reversed = Balls::new(&xyz, 2.0 * sigma, 1e-9);
+        for (&p, &m) in at.iter().zip(&means) {
+            assert_eq!(reversed.mean_around(p), m);
+        }
+    }
 }

@@ -89,6 +89,35 @@ fn a_share_of_the_points_evaluated_is_the_same_in_any_tiling() {
     }
 }
 
+/// The points kept of a thinned noisy cloud, each averaged over the points around it, kept or
+/// not, come out the same in any tiling: a cube at 0.02 dB at 1 tile and at 8 and 27 gives the
+/// same parameters, tau to the bit and the same curves.
+#[test]
+fn kept_points_averaged_are_the_same_in_any_tiling() {
+    use crease::synth::{self, shapes::shape, Sampling, SynthOptions};
+    let d = tempfile::tempdir().unwrap();
+    let las = d.path().join("cube.las");
+    let o = SynthOptions { n: 100_000, noise: 0.02, noise_spacing: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: 7 };
+    synth::write_sampled(&shape("cube", 0.0).unwrap(), &o, &las).unwrap();
+    let input = vec![las];
+    let one = run_extract(&input, &d.path().join("one"), &Params::default(), &Filter::default(), &opts(Some(10.0))).unwrap();
+    assert!(one.params.keep < 1.0 && one.params.average > 0.0, "{:?}", one.params);
+    let ref_curves = read_obj(&d.path().join("one/curves.obj")).unwrap();
+    assert!(ref_curves.len() >= 12, "{} curves", ref_curves.len());
+    let kappa = one.params.kappa;
+    for size in [0.5, 0.34] {
+        let out = d.path().join(format!("t{size}"));
+        let r = run_extract(&input, &out, &Params::default(), &Filter::default(), &opts(Some(size))).unwrap();
+        let c = read_obj(&out.join("curves.obj")).unwrap();
+        assert!(r.tiles >= 8, "{} tiles", r.tiles);
+        assert_eq!(r.params, one.params, "resolved parameters with {} tiles", r.tiles);
+        assert_eq!(r.tau.to_bits(), one.tau.to_bits(), "tau with {} tiles", r.tiles);
+        assert_eq!(c.len(), ref_curves.len(), "curve count with {} tiles", r.tiles);
+        let (ab, ba) = (directed(&c, &ref_curves), directed(&ref_curves, &c));
+        assert!(ab <= 0.5 * kappa && ba <= 0.5 * kappa, "{} tiles: {ab} / {ba} vs kappa {kappa}", r.tiles);
+    }
+}
+
 /// Polylines cut at the borders of the curve stage's growth blocks are stitched back without a
 /// trace: blocks of 16 steps (6 to 22 of them on these fixtures) give the curves of one block
 /// holding the whole cloud, in number, and every vertex within half a spacing of the other's
