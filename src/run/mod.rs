@@ -882,10 +882,10 @@ impl<'a> Run<'a> {
             &self.context(),
             "statistics",
             &self.share(),
-            |t, _| pass::load(store, grid, t, &loading(halo0)),
+            |t, _| pass::load(store, grid, t, &loading(halo0), false),
             |t, first| {
                 let tile = StatsTile { core: grid.core(t), halo: halo0, key_quantum: self.kq, total, seed };
-                statistics::tile_statistics(first, &tile, |halo| pass::load(store, grid, t, &loading(halo))).map(Stats)
+                statistics::tile_statistics(first, &tile, |halo| pass::load(store, grid, t, &loading(halo), false)).map(Stats)
             },
         )?;
         self.pass.statistics_load = time.load;

@@ -12,6 +12,7 @@ use crate::progress::Progress;
 use crate::tiles::{within, Grid, Store};
 use crate::workspace::Workspace;
 use glam::DVec3;
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// Seconds a tile pass spent loading tiles (reading the store, building the cloud: on the
@@ -116,8 +117,9 @@ pub struct Loading<'a> {
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by position key, each
 /// point kept averaged over the ball of radius `average` around it if that is not 0); the
 /// flags say which points are core points to evaluate (the share `evaluate` of the core's,
-/// by another draw from the position key).
-pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoints, Vec<bool>)> {
+/// by another draw from the position key). The averaging runs on the rayon pool if `parallel`
+/// (the same points either way).
+pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading, parallel: bool) -> Result<(TilePoints, Vec<bool>)> {
     let core = grid.core(t);
     let (halo, keep) = (l.halo, l.keep);
     let averaged = l.average > 0.0 && keep < 1.0;
@@ -148,15 +150,22 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
         let flags = tp.xyz.iter().enumerate().map(|(k, &p)| is_core(k, p)).collect();
         return Ok((tp, flags));
     }
-    let balls = Balls::new(&tp.xyz, l.average, l.key_quantum);
-    let (mut out, mut flags) = (TilePoints::default(), vec![]);
-    for (k, &p) in tp.xyz.iter().enumerate() {
-        if (own.contains(&k) || within(&core, halo, p)) && keep_point(position_key(p, l.key_quantum), keep, l.seed) {
-            out.xyz.push(balls.mean_around(p));
-            out.gid.push(tp.gid[k]);
-            flags.push(is_core(k, p));
-        }
+    let chosen: Vec<usize> = (0..tp.xyz.len())
+        .filter(|&k| (own.contains(&k) || within(&core, halo, tp.xyz[k])) && keep_point(position_key(tp.xyz[k], l.key_quantum), keep, l.seed))
+        .collect();
+    let balls = Balls::new(&tp.xyz, l.average, l.key_quantum, parallel);
+    // (Taken cell by cell, so that neighbouring balls search the same runs of cells while
+    // they are in the cache.)
+    let mut by_cell: Vec<([i64; 3], usize)> = chosen.iter().enumerate().map(|(n, &k)| (Balls::cell(tp.xyz[k], l.average), n)).collect();
+    by_cell.sort_unstable();
+    let mean = |&(_, n): &([i64; 3], usize)| balls.mean_around(tp.xyz[chosen[n]]);
+    let means: Vec<DVec3> = if parallel { by_cell.par_iter().map(mean).collect() } else { by_cell.iter().map(mean).collect() };
+    let mut xyz = vec![DVec3::ZERO; chosen.len()];
+    for (&(_, n), m) in by_cell.iter().zip(means) {
+        xyz[n] = m;
     }
+    let out = TilePoints { xyz, gid: chosen.iter().map(|&k| tp.gid[k]).collect() };
+    let flags = chosen.iter().map(|&k| is_core(k, tp.xyz[k])).collect();
     Ok((out, flags))
 }
 
@@ -174,9 +183,14 @@ struct Balls<'a> {
 }
 
 impl<'a> Balls<'a> {
-    fn new(xyz: &'a [DVec3], radius: f64, quantum: f64) -> Balls<'a> {
+    fn new(xyz: &'a [DVec3], radius: f64, quantum: f64, parallel: bool) -> Balls<'a> {
         let mut by_cell: Vec<([i64; 3], u32)> = xyz.iter().enumerate().map(|(k, &p)| (Self::cell(p, radius), k as u32)).collect();
-        by_cell.sort_unstable();
+        // (No two entries are equal: the order is the same either way.)
+        if parallel {
+            by_cell.par_sort_unstable();
+        } else {
+            by_cell.sort_unstable();
+        }
         Balls { xyz, radius, quantum, by_cell }
     }
 
@@ -216,7 +230,7 @@ impl<'a> Balls<'a> {
 /// the rayon pool if `idle` says that the pool has nothing else to do (the same cloud either
 /// way).
 pub fn load_cloud(store: Store, grid: &Grid, t: u32, l: &Loading, side: f64, idle: bool, cancel: &Cancel) -> Result<(Cloud, Vec<bool>)> {
-    let (tp, core) = load(store, grid, t, l)?;
+    let (tp, core) = load(store, grid, t, l, idle)?;
     let origin = tile_origin(&tp);
     Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, side, idle).cancelled_by(cancel), core))
 }
@@ -235,13 +249,13 @@ mod tests {
         let mut rng = Rng::stream(5, 0);
         let sigma = 0.05;
         let mut xyz: Vec<DVec3> = (0..40_000).map(|_| DVec3::new(4.0 * rng.f64(), 4.0 * rng.f64(), sigma * 3f64.sqrt() * (2.0 * rng.f64() - 1.0))).collect();
-        let balls = Balls::new(&xyz, 2.0 * sigma, 1e-9);
+        let balls = Balls::new(&xyz, 2.0 * sigma, 1e-9, false);
         let at: Vec<DVec3> = xyz.iter().copied().filter(|p| p.x > 1.0 && p.x < 3.0 && p.y > 1.0 && p.y < 3.0).take(500).collect();
         let means: Vec<DVec3> = at.iter().map(|&p| balls.mean_around(p)).collect();
         let rms = |v: &[DVec3]| (v.iter().map(|p| p.z * p.z).sum::<f64>() / v.len() as f64).sqrt();
         assert!(rms(&means) < 0.75 * rms(&at), "{} vs {}", rms(&means), rms(&at));
         xyz.reverse();
-        let reversed = Balls::new(&xyz, 2.0 * sigma, 1e-9);
+        let reversed = Balls::new(&xyz, 2.0 * sigma, 1e-9, true);
         for (&p, &m) in at.iter().zip(&means) {
             assert_eq!(reversed.mean_around(p), m);
         }
