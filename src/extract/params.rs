@@ -46,7 +46,8 @@ pub struct Resolved {
     pub surface_noise: f64,
     /// Length unit of the defaults: max(kappa, 2 noise), so neighbourhoods outgrow the noise.
     pub scale: f64,
-    /// Share of points used by the fits (1: all; less when noise makes neighbourhoods large).
+    /// Share of points used by the fits (1: all; less when noise makes neighbourhoods large,
+    /// each then averaged over the points around it: see [`Resolved::average`]).
     pub keep: f64,
     /// Share of the points used by the fits at which stages 1 and 2 are evaluated (1: all;
     /// less only when [`Params::evaluate_per_fit`] asks for fewer than a fit's disk holds).
