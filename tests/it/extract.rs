@@ -96,6 +96,20 @@ fn noisy_sampled_mesh() {
     assert!(s.precision.unwrap() >= 0.95, "precision {:?}", s.precision);
 }
 
+/// The anchor mesh at 0.01 dB noise, 500 k points, the row (recall >= 0.95, precision
+/// >= 0.93, mean distance <= 0.003 dB). Its small bolt holes curve as tightly as the
+/// neighbourhoods are wide; it met the row once the points kept of the thinned cloud were
+/// averaged over the points dropped around them. Needs `../shared/data/meshes`.
+#[test]
+#[ignore = "needs ../shared"]
+fn anchor_at_one_percent_noise() {
+    let (curves, s) = cli_mesh_scores("anchor", &["-n", "500000", "--noise", "0.01"]);
+    eprintln!("anchor 0.01 dB: {} curves, {s:?}", curves.len());
+    assert!(s.recall >= 0.95, "recall {}", s.recall);
+    assert!(s.precision.unwrap() >= 0.93, "precision {:?}", s.precision);
+    assert!(s.mean_distance.unwrap() <= 0.003, "mean distance {:?}", s.mean_distance);
+}
+
 /// `../shared/data/meshes/<name>.off` sampled with `crease synth mesh` (options `synth`) and
 /// extracted with `crease extract`, as a user would: the curves and their scores.
 fn cli_mesh_scores(name: &str, synth: &[&str]) -> (Vec<Polyline>, Scores) {
