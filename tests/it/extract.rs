@@ -96,8 +96,8 @@ fn noisy_sampled_mesh() {
     assert!(s.precision.unwrap() >= 0.95, "precision {:?}", s.precision);
 }
 
-/// The anchor mesh at 0.01 dB noise, 500 k points, the row (recall >= 0.95, precision
-/// >= 0.93, mean distance <= 0.003 dB). Its small bolt holes curve as tightly as the
+/// The anchor mesh at 0.01 dB noise, 500 k points, the row (recall at least 0.95,
+/// precision at least 0.93, mean distance at most 0.003 dB). Its small bolt holes curve as tightly as the
 /// neighbourhoods are wide; it met the row once the points kept of the thinned cloud were
 /// averaged over the points dropped around them. Needs `../shared/data/meshes`.
 #[test]
