@@ -874,7 +874,7 @@ impl<'a> Run<'a> {
         drop(probe);
         let total: u64 = tile_points.iter().sum();
         let seed = params.seed.unwrap_or(crate::extract::params::DEFAULT_SEED);
-        let loading = |halo| Loading { halo, keep: 1.0, evaluate: 1.0, seed, key_quantum: self.kq, counts: tile_points, average: 0.0 };
+        let loading = |halo| Loading { halo, keep: 1.0, evaluate: 1.0, seed, key_quantum: self.kq, counts: tile_points, average: 0.0, average_share: 1.0 };
         let halo0 = 24.0 * kappa0;
         // (The pool has little to do here but wait for the next tile, so the tile is indexed
         // on the pool, not on the loader thread as in the passes below.)
@@ -882,10 +882,10 @@ impl<'a> Run<'a> {
             &self.context(),
             "statistics",
             &self.share(),
-            |t, _| pass::load(store, grid, t, &loading(halo0), false),
+            |t, _| pass::load(store, grid, t, &loading(halo0)),
             |t, first| {
                 let tile = StatsTile { core: grid.core(t), halo: halo0, key_quantum: self.kq, total, seed };
-                statistics::tile_statistics(first, &tile, |halo| pass::load(store, grid, t, &loading(halo), false)).map(Stats)
+                statistics::tile_statistics(first, &tile, |halo| pass::load(store, grid, t, &loading(halo))).map(Stats)
             },
         )?;
         self.pass.statistics_load = time.load;
@@ -906,8 +906,8 @@ impl<'a> Run<'a> {
     /// How the residual and projection passes load a tile: the same way in both, so that the
     /// residuals come back in the cloud's order.
     fn cloud_loading(&self, r: &Resolved) -> Loading<'_> {
-        let (halo, keep, average) = (r.halo(), r.keep, r.average);
-        Loading { halo, keep, evaluate: r.evaluate, seed: r.seed, key_quantum: self.kq, counts: &self.manifest.tile_points, average }
+        let (halo, keep, average, average_share) = (r.halo(), r.keep, r.average, r.average_share);
+        Loading { halo, keep, evaluate: r.evaluate, seed: r.seed, key_quantum: self.kq, counts: &self.manifest.tile_points, average, average_share }
     }
 
     /// Residual pass (stage 1); returns tau, the mean residual over all points (an exact sum:

@@ -112,26 +112,36 @@ pub struct Loading<'a> {
     /// Radius over which each kept point is averaged when the cloud is thinned (0: none; see
     /// [`Resolved::average`](crate::extract::Resolved::average)).
     pub average: f64,
+    /// Share of the points the averaging takes (see
+    /// [`Resolved::average_share`](crate::extract::Resolved::average_share)).
+    pub average_share: f64,
 }
 
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by position key, each
-/// point kept averaged over the ball of radius `average` around it if that is not 0); the
-/// flags say which points are core points to evaluate (the share `evaluate` of the core's,
-/// by another draw from the position key). The averaging runs on the rayon pool if `parallel`
-/// (the same points either way).
-pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading, parallel: bool) -> Result<(TilePoints, Vec<bool>)> {
+/// point kept averaged over the share `average_share` of the points in the ball of radius
+/// `average` around it if that is not 0); the flags say which points are core points to
+/// evaluate (the share `evaluate` of the core's, by another draw from the position key). The
+/// averaging runs on the rayon pool: on a cloud thinned to a few percent, loading a tile can
+/// take as long as the fits of the tile before it.
+pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoints, Vec<bool>)> {
     let core = grid.core(t);
     let (halo, keep) = (l.halo, l.keep);
     let averaged = l.average > 0.0 && keep < 1.0;
-    // The points within `average` of a point of the halo are read too, all of them.
+    // The points within `average` of a point of the halo are read too.
     let reach = if averaged { halo + l.average } else { halo };
-    let kept = |p| averaged || keep >= 1.0 || keep_point(position_key(p, l.key_quantum), keep, l.seed);
+    let kept = |key| keep >= 1.0 || keep_point(key, keep, l.seed);
+    // (A key of its own, so that the points averaged over do not follow those kept.)
+    let member = |key: u64| averaged && (l.average_share >= 1.0 || keep_point(key ^ 0xA7E4_6E5A, l.average_share, l.seed));
+    let read = |p| {
+        let key = position_key(p, l.key_quantum);
+        kept(key) || member(key)
+    };
     let mut tp = TilePoints::default();
     let mut own = 0..0;
     for n in grid.around(t, reach) {
         let before = tp.xyz.len();
         if n == t {
-            let held = store.read(n, &mut tp, |p, _| kept(p))?;
+            let held = store.read(n, &mut tp, |p, _| read(p))?;
             let bucketed = l.counts.get(t as usize).copied().unwrap_or(0);
             if held != bucketed {
                 // (A deleted or truncated tile file once dropped its points without a word.)
@@ -139,7 +149,7 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading, parallel: bool) -> R
             }
             own = before..tp.xyz.len();
         } else {
-            store.read_near(n, Some((&core, reach)), &mut tp, |p, _| within(&core, reach, p) && kept(p))?;
+            store.read_near(n, Some((&core, reach)), &mut tp, |p, _| within(&core, reach, p) && read(p))?;
         }
     }
     let is_core = |k: usize, p: DVec3| {
@@ -150,16 +160,15 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading, parallel: bool) -> R
         let flags = tp.xyz.iter().enumerate().map(|(k, &p)| is_core(k, p)).collect();
         return Ok((tp, flags));
     }
-    let chosen: Vec<usize> = (0..tp.xyz.len())
-        .filter(|&k| (own.contains(&k) || within(&core, halo, tp.xyz[k])) && keep_point(position_key(tp.xyz[k], l.key_quantum), keep, l.seed))
-        .collect();
-    let balls = Balls::new(&tp.xyz, l.average, l.key_quantum, parallel);
+    let keys: Vec<u64> = tp.xyz.par_iter().map(|&p| position_key(p, l.key_quantum)).collect();
+    let chosen: Vec<usize> = (0..tp.xyz.len()).filter(|&k| (own.contains(&k) || within(&core, halo, tp.xyz[k])) && kept(keys[k])).collect();
+    let members: Vec<DVec3> = tp.xyz.iter().zip(&keys).filter(|&(_, &key)| member(key)).map(|(&p, _)| p).collect();
+    let balls = Balls::new(&members, l.average, l.key_quantum);
     // (Taken cell by cell, so that neighbouring balls search the same runs of cells while
     // they are in the cache.)
-    let mut by_cell: Vec<([i64; 3], usize)> = chosen.iter().enumerate().map(|(n, &k)| (Balls::cell(tp.xyz[k], l.average), n)).collect();
-    by_cell.sort_unstable();
-    let mean = |&(_, n): &([i64; 3], usize)| balls.mean_around(tp.xyz[chosen[n]]);
-    let means: Vec<DVec3> = if parallel { by_cell.par_iter().map(mean).collect() } else { by_cell.iter().map(mean).collect() };
+    let mut by_cell: Vec<(u128, usize)> = chosen.iter().enumerate().map(|(n, &k)| (Balls::key(Balls::cell(tp.xyz[k], l.average), balls.base), n)).collect();
+    by_cell.par_sort_unstable();
+    let means: Vec<DVec3> = by_cell.par_iter().map(|&(_, n)| balls.mean_around(tp.xyz[chosen[n]])).collect();
     let mut xyz = vec![DVec3::ZERO; chosen.len()];
     for (&(_, n), m) in by_cell.iter().zip(means) {
         xyz[n] = m;
@@ -173,53 +182,75 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading, parallel: bool) -> R
 /// computes them: the points are found by their world positions and summed as integers (in
 /// quanta of the position keys), so neither a tile's origin nor the order of its points
 /// enters.
-struct Balls<'a> {
-    xyz: &'a [DVec3],
+struct Balls {
     radius: f64,
     quantum: f64,
-    /// Point indices by grid cell of side `radius` (z, y, x), so that a ball's points lie in
-    /// nine runs of three cells.
-    by_cell: Vec<([i64; 3], u32)>,
+    /// The grid cell (side `radius`) of the first point, the origin of the cell keys.
+    base: [i64; 3],
+    /// The points' cell keys (see [`Balls::key`]) in increasing order, so that a ball's
+    /// points lie in nine runs of three cells; with each point's position and its position in
+    /// quanta, in the same order (read in runs: a ball takes hundreds of points when the
+    /// cloud is thinned to a few percent).
+    keys: Vec<u128>,
+    xyz: Vec<DVec3>,
+    quanta: Vec<[i64; 3]>,
 }
 
-impl<'a> Balls<'a> {
-    fn new(xyz: &'a [DVec3], radius: f64, quantum: f64, parallel: bool) -> Balls<'a> {
-        let mut by_cell: Vec<([i64; 3], u32)> = xyz.iter().enumerate().map(|(k, &p)| (Self::cell(p, radius), k as u32)).collect();
-        // (No two entries are equal: the order is the same either way.)
-        if parallel {
-            by_cell.par_sort_unstable();
-        } else {
-            by_cell.sort_unstable();
-        }
-        Balls { xyz, radius, quantum, by_cell }
+/// Bits of a cell key per axis: cells relative to the base, offset so that every cell of a
+/// tile's points and their neighbours is positive.
+const KEY_BITS: u32 = 42;
+const KEY_OFFSET: i64 = 1 << (KEY_BITS - 1);
+
+impl Balls {
+    fn new(xyz: &[DVec3], radius: f64, quantum: f64) -> Balls {
+        let base = xyz.first().map_or([0; 3], |&p| Self::cell(p, radius));
+        let mut order: Vec<(u128, u32)> = xyz.par_iter().enumerate().map(|(k, &p)| (Self::key(Self::cell(p, radius), base), k as u32)).collect();
+        order.par_sort_unstable();
+        let xyz: Vec<DVec3> = order.par_iter().map(|&(_, k)| xyz[k as usize]).collect();
+        let quanta = xyz
+            .par_iter()
+            .map(|&p| {
+                let v = (p / quantum).round();
+                [v.x as i64, v.y as i64, v.z as i64]
+            })
+            .collect();
+        Balls { radius, quantum, base, keys: order.into_iter().map(|(c, _)| c).collect(), xyz, quanta }
     }
 
     fn cell(p: DVec3, radius: f64) -> [i64; 3] {
         let c = (p / radius).floor();
-        [c.z as i64, c.y as i64, c.x as i64]
+        [c.x as i64, c.y as i64, c.z as i64]
     }
 
-    /// The mean of the points within the radius of `p`, one of the points.
+    /// The sorting key of cell `c`: z, then y, then x, each relative to `base`. (A tile spans
+    /// far fewer than 2^41 cells of a noise-sized radius.)
+    fn key(c: [i64; 3], base: [i64; 3]) -> u128 {
+        let axis = |a: usize| (c[a] - base[a] + KEY_OFFSET) as u128;
+        (axis(2) << (2 * KEY_BITS)) | (axis(1) << KEY_BITS) | axis(0)
+    }
+
+    /// The mean of the points within the radius of `p` (`p` if there are none).
     fn mean_around(&self, p: DVec3) -> DVec3 {
         let c = Self::cell(p, self.radius);
         let r2 = self.radius * self.radius;
         let (mut sum, mut count) = ([0i128; 3], 0i128);
         for dz in -1..=1 {
             for dy in -1..=1 {
-                let (z, y) = (c[0] + dz, c[1] + dy);
-                let lo = self.by_cell.partition_point(|e| e.0 < [z, y, c[2] - 1]);
-                let hi = self.by_cell.partition_point(|e| e.0 <= [z, y, c[2] + 1]);
-                for &(_, j) in &self.by_cell[lo..hi] {
-                    let o = self.xyz[j as usize];
+                let row = |dx: i64| Self::key([c[0] + dx, c[1] + dy, c[2] + dz], self.base);
+                let lo = self.keys.partition_point(|&k| k < row(-1));
+                let hi = lo + self.keys[lo..].partition_point(|&k| k <= row(1));
+                for (o, v) in self.xyz[lo..hi].iter().zip(&self.quanta[lo..hi]) {
                     if o.distance_squared(p) <= r2 {
-                        let v = (o / self.quantum).round();
-                        sum[0] += v.x as i128;
-                        sum[1] += v.y as i128;
-                        sum[2] += v.z as i128;
+                        sum[0] += v[0] as i128;
+                        sum[1] += v[1] as i128;
+                        sum[2] += v[2] as i128;
                         count += 1;
                     }
                 }
             }
+        }
+        if count == 0 {
+            return p;
         }
         let mean = |s: i128| (s.div_euclid(count) as f64 + s.rem_euclid(count) as f64 / count as f64) * self.quantum;
         DVec3::new(mean(sum[0]), mean(sum[1]), mean(sum[2]))
@@ -230,7 +261,7 @@ impl<'a> Balls<'a> {
 /// the rayon pool if `idle` says that the pool has nothing else to do (the same cloud either
 /// way).
 pub fn load_cloud(store: Store, grid: &Grid, t: u32, l: &Loading, side: f64, idle: bool, cancel: &Cancel) -> Result<(Cloud, Vec<bool>)> {
-    let (tp, core) = load(store, grid, t, l, idle)?;
+    let (tp, core) = load(store, grid, t, l)?;
     let origin = tile_origin(&tp);
     Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, side, idle).cancelled_by(cancel), core))
 }
@@ -249,13 +280,13 @@ mod tests {
         let mut rng = Rng::stream(5, 0);
         let sigma = 0.05;
         let mut xyz: Vec<DVec3> = (0..40_000).map(|_| DVec3::new(4.0 * rng.f64(), 4.0 * rng.f64(), sigma * 3f64.sqrt() * (2.0 * rng.f64() - 1.0))).collect();
-        let balls = Balls::new(&xyz, 2.0 * sigma, 1e-9, false);
+        let balls = Balls::new(&xyz, 2.0 * sigma, 1e-9);
         let at: Vec<DVec3> = xyz.iter().copied().filter(|p| p.x > 1.0 && p.x < 3.0 && p.y > 1.0 && p.y < 3.0).take(500).collect();
         let means: Vec<DVec3> = at.iter().map(|&p| balls.mean_around(p)).collect();
         let rms = |v: &[DVec3]| (v.iter().map(|p| p.z * p.z).sum::<f64>() / v.len() as f64).sqrt();
         assert!(rms(&means) < 0.75 * rms(&at), "{} vs {}", rms(&means), rms(&at));
         xyz.reverse();
-        let reversed = Balls::new(&xyz, 2.0 * sigma, 1e-9, true);
+        let reversed = Balls::new(&xyz, 2.0 * sigma, 1e-9);
         for (&p, &m) in at.iter().zip(&means) {
             assert_eq!(reversed.mean_around(p), m);
         }
