@@ -73,20 +73,31 @@ fn a_share_of_the_points_evaluated_is_the_same_in_any_tiling() {
     eprintln!("share {share:.3}, evaluated {evaluated:.3}, {} candidates", one.counts.candidates);
     assert!(share > 0.2 && share < 0.6, "share {share}");
     assert!((evaluated - share).abs() < 0.03, "evaluated {evaluated} of the points at share {share}");
-    let ref_curves = read_obj(&d.path().join("one/curves.obj")).unwrap();
+    for r in same_in_smaller_tiles(d.path(), &input, &params, &one) {
+        assert_eq!(r.counts.evaluated, one.counts.evaluated, "points evaluated with {} tiles", r.tiles);
+    }
+}
+
+/// Runs `input` with `params` at tiles of 0.5 and 0.34 (8 and 27 tiles of a unit cloud or
+/// more), asserting each gives the parameters, tau to the bit and the curves of `one`, the run
+/// at one tile in `dir/one`; returns the runs' reports for further checks.
+fn same_in_smaller_tiles(dir: &Path, input: &[PathBuf], params: &Params, one: &crease::run::Report) -> Vec<crease::run::Report> {
+    let ref_curves = read_obj(&dir.join("one/curves.obj")).unwrap();
     let kappa = one.params.kappa;
+    let mut reports = vec![];
     for size in [0.5, 0.34] {
-        let out = d.path().join(format!("t{size}"));
-        let r = run_extract(&input, &out, &params, &Filter::default(), &opts(Some(size))).unwrap();
+        let out = dir.join(format!("t{size}"));
+        let r = run_extract(input, &out, params, &Filter::default(), &opts(Some(size))).unwrap();
         let c = read_obj(&out.join("curves.obj")).unwrap();
         assert!(r.tiles >= 8, "{} tiles", r.tiles);
         assert_eq!(r.params, one.params, "resolved parameters with {} tiles: {:?} vs {:?}", r.tiles, r.params, one.params);
-        assert_eq!(r.counts.evaluated, one.counts.evaluated, "points evaluated with {} tiles", r.tiles);
         assert_eq!(r.tau.to_bits(), one.tau.to_bits(), "tau with {} tiles", r.tiles);
         assert_eq!(c.len(), ref_curves.len(), "curve count with {} tiles", r.tiles);
         let (ab, ba) = (directed(&c, &ref_curves), directed(&ref_curves, &c));
         assert!(ab <= 0.5 * kappa && ba <= 0.5 * kappa, "{} tiles: {ab} / {ba} vs kappa {kappa}", r.tiles);
+        reports.push(r);
     }
+    reports
 }
 
 /// The points kept of a thinned noisy cloud, each averaged over the points around it, kept or
@@ -104,18 +115,7 @@ fn kept_points_averaged_are_the_same_in_any_tiling() {
     assert!(one.params.keep < 1.0 && one.params.average > 0.0, "{:?}", one.params);
     let ref_curves = read_obj(&d.path().join("one/curves.obj")).unwrap();
     assert!(ref_curves.len() >= 12, "{} curves", ref_curves.len());
-    let kappa = one.params.kappa;
-    for size in [0.5, 0.34] {
-        let out = d.path().join(format!("t{size}"));
-        let r = run_extract(&input, &out, &Params::default(), &Filter::default(), &opts(Some(size))).unwrap();
-        let c = read_obj(&out.join("curves.obj")).unwrap();
-        assert!(r.tiles >= 8, "{} tiles", r.tiles);
-        assert_eq!(r.params, one.params, "resolved parameters with {} tiles", r.tiles);
-        assert_eq!(r.tau.to_bits(), one.tau.to_bits(), "tau with {} tiles", r.tiles);
-        assert_eq!(c.len(), ref_curves.len(), "curve count with {} tiles", r.tiles);
-        let (ab, ba) = (directed(&c, &ref_curves), directed(&ref_curves, &c));
-        assert!(ab <= 0.5 * kappa && ba <= 0.5 * kappa, "{} tiles: {ab} / {ba} vs kappa {kappa}", r.tiles);
-    }
+    same_in_smaller_tiles(d.path(), &input, &Params::default(), &one);
 }
 
 /// Polylines cut at the borders of the curve stage's growth blocks are stitched back without a
