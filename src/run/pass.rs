@@ -132,9 +132,12 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
     let kept = |key| keep >= 1.0 || keep_point(key, keep, l.seed);
     // (A key of its own, so that the points averaged over do not follow those kept.)
     let member = |key: u64| averaged && (l.average_share >= 1.0 || keep_point(key ^ 0xA7E4_6E5A, l.average_share, l.seed));
+    // (An unthinned cloud reads every point without hashing its position.)
     let read = |p| {
-        let key = position_key(p, l.key_quantum);
-        kept(key) || member(key)
+        keep >= 1.0 || {
+            let key = position_key(p, l.key_quantum);
+            kept(key) || member(key)
+        }
     };
     let mut tp = TilePoints::default();
     let mut own = 0..0;
