@@ -185,6 +185,21 @@ impl Cloud {
         self.neighbours_in(q, Neighbourhood { radius: r, reach: f64::INFINITY, min, max, ordered: true }, out)
     }
 
+    /// As [`Cloud::neighbours`] with no minimum, for balls that may hold far more than `max`
+    /// points: a ball of more than four times `max` is first thinned by a hash of each point's
+    /// global id (the same points in any tiling), so that the subsample costs a pass over the
+    /// ball rather than a sort of it.
+    pub fn neighbours_thinned(&self, q: DVec3, r: f64, max: usize, out: &mut Vec<(u32, f32)>) {
+        self.neighbours_in(q, Neighbourhood { radius: r, reach: f64::INFINITY, min: 0, max: usize::MAX, ordered: false }, out);
+        let n = out.len();
+        if n > 4 * max {
+            // (A share of the 2^64 hash values.)
+            let below = ((4 * max) as f64 / n as f64 * 2f64.powi(64)) as u64;
+            out.retain(|a| crate::rng::Rng::new(self.gid[a.0 as usize] ^ 0x6E01_5EBA).next_u64() < below);
+        }
+        self.order_and_thin(max, true, out);
+    }
+
     /// As [`Cloud::neighbours`], for a neighbourhood `nb`: a sparse one is widened no farther
     /// than `nb.reach` (it may then hold fewer than `nb.min` points), and unless `nb.ordered`
     /// the points come in the tree's order when they need not be subsampled (for

@@ -44,7 +44,8 @@ pub struct Resolved {
     /// [`SURFACE_NOISE`](super::project::SURFACE_NOISE)).
     #[serde(default)]
     pub surface_noise: f64,
-    /// Length unit of the defaults: max(kappa, 2 noise), so neighbourhoods outgrow the noise.
+    /// Length unit of the defaults: max(kappa, [`NOISE_SCALE`] noise), so neighbourhoods outgrow
+    /// the noise; under noise, at least wide enough for a fit of [`MIN_NOISY_FIT`] points.
     pub scale: f64,
     /// Share of points used by the fits (1: all; less when noise makes neighbourhoods large,
     /// each then averaged over the points around it: see [`Resolved::average`]).
@@ -99,8 +100,22 @@ pub const DEFAULT_MIN_ANGLE_DEG: f64 = 28.0;
 pub const DEFAULT_SEED: u64 = 1;
 /// Neighbours a fit should see; denser clouds are thinned to about this many.
 pub const TARGET_NEIGHBOURS: f64 = 150.0;
-/// The default length unit is at least this many noise deviations.
-pub const NOISE_SCALE: f64 = 1.5;
+/// Fit radius, in length units (see [`Resolved::scale`]).
+pub const FIT_SCALES: f64 = 6.0;
+/// Fewest points a fit holds where the noise sizes the neighbourhoods (see [`NOISE_SCALE`]).
+/// At 2 point spacings of noise, 1.25 deviations make fits of about 35 points, and the quality
+/// table's 2-spacing row lost recall (chamfer 1.0 -> 0.97, blade 1.0 -> 0.94, fandisk 0.99 ->
+/// 0.98); 1.5 deviations of the noise as measured before made about 50; 150 found every
+/// feature but doubled fandisk's mean distance (0.00033 -> 0.00067 dB) and took 1.5 times as
+/// long.
+pub const MIN_NOISY_FIT: f64 = 50.0;
+/// The default length unit is at least this many noise deviations, and under noise at least
+/// wide enough for a fit of [`MIN_NOISY_FIT`] points. (1.5 was chosen when the
+/// noise was measured within 16 spacings, which measured 0.77-0.9 of the deviation of the
+/// quality clouds' dB noise at 500 k points; measured within 5 deviations (see
+/// [`super::statistics::NOISE_BALL`]) it comes out 0.9-0.95 of it, and 1.25 sizes the
+/// neighbourhoods about as before at 0.02 dB, a little narrower at 0.01 and 0.005.)
+pub const NOISE_SCALE: f64 = 1.25;
 /// Radius, in noise deviations, of the ball over which each point kept of a thinned cloud is
 /// averaged (see [`Resolved::average`]). Thinning to [`TARGET_NEIGHBOURS`] a fit drops most of
 /// a noisy cloud (96 % of fandisk at 0.02 dB); averaging lets the points dropped narrow the
@@ -164,8 +179,16 @@ impl Params {
 
     /// Resolves defaults given the measured spacing `kappa` and noise `noise`.
     pub fn resolve(&self, kappa: f64, noise: f64) -> Resolved {
+        self.resolve_at_least(kappa, noise, 0.0)
+    }
+
+    /// As [`Params::resolve`], with the length unit at least `floor` where the noise sizes it.
+    fn resolve_at_least(&self, kappa: f64, noise: f64, floor: f64) -> Resolved {
         let kappa = self.kappa.unwrap_or(kappa);
-        let scale = kappa.max(NOISE_SCALE * noise);
+        let mut scale = kappa.max(NOISE_SCALE * noise);
+        if scale > kappa {
+            scale = scale.max(floor);
+        }
         let rmls = self.rmls_radius.unwrap_or(9.0 * scale);
         let step = self.step.unwrap_or(4.5 * scale);
         Resolved {
@@ -177,7 +200,7 @@ impl Params {
             evaluate: 1.0,
             average: 0.0,
             average_share: 1.0,
-            fit_radius: self.fit_radius.unwrap_or(6.0 * scale),
+            fit_radius: self.fit_radius.unwrap_or(FIT_SCALES * scale),
             rmls_radius: rmls,
             min_threshold: 0.05 * scale,
             step,
@@ -207,10 +230,12 @@ pub fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
     // (On a noise-free cloud the fits leave rounding residue, 1e-31 or so, that differs with
     // the tiles' origins: below a 2^-26 share of the spacing, noise is zero.)
     let noise = |x: f64| if x < spacing * 2f64.powi(-26) { 0.0 } else { settle(x) };
-    let mut r = params.resolve(spacing, noise(median(&mut n)));
-    r.surface_noise = noise(quantile(&mut n, 0.25));
     // (Settled as the spacing is: the share of points kept must be the same in any tiling.)
-    let count = settle(median(&mut d)) * std::f64::consts::PI * r.fit_radius.powi(2);
+    let density = settle(median(&mut d));
+    let floor = if density > 0.0 { (MIN_NOISY_FIT / (std::f64::consts::PI * density)).sqrt() / FIT_SCALES } else { 0.0 };
+    let mut r = params.resolve_at_least(spacing, noise(median(&mut n)), floor);
+    r.surface_noise = noise(quantile(&mut n, 0.25));
+    let count = density * std::f64::consts::PI * r.fit_radius.powi(2);
     r.keep = if count > 0.0 { (TARGET_NEIGHBOURS / count).min(1.0) } else { 1.0 };
     if r.keep >= 0.7 {
         r.keep = 1.0;
@@ -256,6 +281,23 @@ mod tests {
         assert!((held - TARGET_NEIGHBOURS).abs() < 1e-6 * TARGET_NEIGHBOURS, "{held}");
         assert!((noisy.evaluate - 40.0 / TARGET_NEIGHBOURS).abs() < 1e-9, "{}", noisy.evaluate);
         assert_eq!(resolve(&Params::default(), &stats(1.0, 3.0, density)).evaluate, 1.0);
+    }
+
+    /// Where the noise sizes the neighbourhoods, a fit holds at least [`MIN_NOISY_FIT`] points;
+    /// a clean cloud's length unit stays its spacing, and a noisier one's the noise's.
+    #[test]
+    fn noisy_fits_hold_enough_points() {
+        let density = 2f64.ln() / std::f64::consts::PI; // a median spacing of 1
+        let held = |r: &Resolved| density * std::f64::consts::PI * r.fit_radius.powi(2);
+        let clean = resolve(&Params::default(), &stats(1.0, 0.0, density));
+        assert_eq!(clean.scale, 1.0);
+        assert!(held(&clean) < MIN_NOISY_FIT);
+        // Noise of about 2 spacings: 1.25 of its deviations would make fits of about 28 points.
+        let two = resolve(&Params::default(), &stats(1.0, 0.9, density));
+        assert!(two.noise_limited());
+        assert!((held(&two) - MIN_NOISY_FIT).abs() < 1e-9 * MIN_NOISY_FIT, "{}", held(&two));
+        let far = resolve(&Params::default(), &stats(1.0, 3.0, density));
+        assert_eq!(far.scale, NOISE_SCALE * 3.0);
     }
 
     /// Only a thinned cloud's kept points are averaged, over [`AVERAGE_NOISE`] deviations and

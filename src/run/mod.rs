@@ -855,9 +855,9 @@ impl<'a> Run<'a> {
         Ok(())
     }
 
-    /// Statistics pass: spacing, noise and density at sampled points, with a halo wide enough
-    /// for the 16-kappa noise fit (kappa from a probe of the fullest tile); then the
-    /// parameters are resolved from them.
+    /// Statistics pass: spacing, noise and density at sampled points, with a first halo wide
+    /// enough for the 16-kappa fits (kappa from a probe of the fullest tile; tiles whose noise
+    /// fits reach farther are loaded again, wider); then the parameters are resolved from them.
     fn statistics(&mut self, params: &Params) -> Result<Option<Resolved>> {
         let t = Instant::now();
         if let Some(r) = &self.manifest.resolved {
