@@ -45,7 +45,8 @@ pub struct Resolved {
     #[serde(default)]
     pub surface_noise: f64,
     /// Length unit of the defaults: max(kappa, [`NOISE_SCALE`] noise), so neighbourhoods outgrow
-    /// the noise; under noise, at least wide enough for a fit of [`MIN_NOISY_FIT`] points.
+    /// the noise, and under noise at least wide enough for a fit of [`MIN_NOISY_FIT`] points
+    /// (up to [`NOISY_FIT_NOISE`] deviations).
     pub scale: f64,
     /// Share of points used by the fits (1: all; less when noise makes neighbourhoods large,
     /// each then averaged over the points around it: see [`Resolved::average`]).
@@ -109,6 +110,11 @@ pub const FIT_SCALES: f64 = 6.0;
 /// feature but doubled fandisk's mean distance (0.00033 -> 0.00067 dB) and took 1.5 times as
 /// long.
 pub const MIN_NOISY_FIT: f64 = 50.0;
+/// The length unit widens for [`MIN_NOISY_FIT`] up to this many noise deviations, so that it
+/// grows with the noise from the spacing on. (Widened only where 1.25 deviations exceed the
+/// spacing, a shared real scan whose noise is 0.76 spacings, `plane.laz`, fell back to the
+/// spacing, fits of about 28 points, and 61 curves on its plane; 4 with this, 6 before.)
+pub const NOISY_FIT_NOISE: f64 = 2.0;
 /// The default length unit is at least this many noise deviations, and under noise at least
 /// wide enough for a fit of [`MIN_NOISY_FIT`] points. (1.5 was chosen when the
 /// noise was measured within 16 spacings, which measured 0.77-0.9 of the deviation of the
@@ -182,13 +188,11 @@ impl Params {
         self.resolve_at_least(kappa, noise, 0.0)
     }
 
-    /// As [`Params::resolve`], with the length unit at least `floor` where the noise sizes it.
+    /// As [`Params::resolve`], with the length unit at least `floor` or
+    /// [`NOISY_FIT_NOISE`] noise deviations, whichever is less.
     fn resolve_at_least(&self, kappa: f64, noise: f64, floor: f64) -> Resolved {
         let kappa = self.kappa.unwrap_or(kappa);
-        let mut scale = kappa.max(NOISE_SCALE * noise);
-        if scale > kappa {
-            scale = scale.max(floor);
-        }
+        let scale = kappa.max(NOISE_SCALE * noise).max(floor.min(NOISY_FIT_NOISE * noise));
         let rmls = self.rmls_radius.unwrap_or(9.0 * scale);
         let step = self.step.unwrap_or(4.5 * scale);
         Resolved {
@@ -298,6 +302,12 @@ mod tests {
         assert!((held(&two) - MIN_NOISY_FIT).abs() < 1e-9 * MIN_NOISY_FIT, "{}", held(&two));
         let far = resolve(&Params::default(), &stats(1.0, 3.0, density));
         assert_eq!(far.scale, NOISE_SCALE * 3.0);
+        // Between: the unit grows with the noise from the spacing on (no jump where the noise
+        // starts to size it).
+        let units: Vec<f64> = [0.3, 0.45, 0.55, 0.6, 0.7, 0.9].iter().map(|&x| resolve(&Params::default(), &stats(1.0, x, density)).scale).collect();
+        assert_eq!(units[0], 1.0);
+        assert!(units.windows(2).all(|w| w[1] >= w[0] && w[1] - w[0] <= 2.0 * 0.2 + 1e-6), "{units:?}");
+        assert!((units[3] - NOISY_FIT_NOISE * 0.6).abs() < 1e-6, "{units:?}");
     }
 
     /// Only a thinned cloud's kept points are averaged, over [`AVERAGE_NOISE`] deviations and
