@@ -91,6 +91,23 @@ impl Cloud {
         Cloud::build(world, gids, origin, parallel, Some(side))
     }
 
+    /// The points `which` (stored indices, in increasing order) as a cloud of their own, with
+    /// the same local coordinates; its `ids` are their stored indices in this cloud.
+    pub fn subset(&self, which: &[u32]) -> Cloud {
+        Cloud {
+            origin: self.origin,
+            pos: which.iter().map(|&i| self.pos[i as usize]).collect(),
+            ids: which.to_vec(),
+            gid: which.iter().map(|&i| self.gid[i as usize]).collect(),
+            index: std::sync::OnceLock::new(),
+            parallel: self.parallel,
+            cells: None,
+            rank: std::sync::OnceLock::new(),
+            slack: self.slack,
+            cancel: None,
+        }
+    }
+
     fn build(world: &[DVec3], gids: &[u64], origin: DVec3, parallel: bool, side: Option<f64>) -> Cloud {
         use rayon::prelude::*;
         let ext = world.iter().fold(0.0f64, |m, p| m.max((*p - origin).max_element()));
@@ -183,21 +200,6 @@ impl Cloud {
     /// most about `max` of them, an even subsample of the ball when there are more.
     pub fn neighbours(&self, q: DVec3, r: f64, min: usize, max: usize, out: &mut Vec<(u32, f32)>) {
         self.neighbours_in(q, Neighbourhood { radius: r, reach: f64::INFINITY, min, max, ordered: true }, out)
-    }
-
-    /// As [`Cloud::neighbours`] with no minimum, for balls that may hold far more than `max`
-    /// points: a ball of more than four times `max` is first thinned by a hash of each point's
-    /// global id (the same points in any tiling), so that the subsample costs a pass over the
-    /// ball rather than a sort of it.
-    pub fn neighbours_thinned(&self, q: DVec3, r: f64, max: usize, out: &mut Vec<(u32, f32)>) {
-        self.neighbours_in(q, Neighbourhood { radius: r, reach: f64::INFINITY, min: 0, max: usize::MAX, ordered: false }, out);
-        let n = out.len();
-        if n > 4 * max {
-            // (A share of the 2^64 hash values.)
-            let below = ((4 * max) as f64 / n as f64 * 2f64.powi(64)) as u64;
-            out.retain(|a| crate::rng::Rng::new(self.gid[a.0 as usize] ^ 0x6E01_5EBA).next_u64() < below);
-        }
-        self.order_and_thin(max, true, out);
     }
 
     /// As [`Cloud::neighbours`], for a neighbourhood `nb`: a sparse one is widened no farther
@@ -697,6 +699,70 @@ pub struct Neighbourhood {
     pub ordered: bool,
 }
 
+/// A cloud with its points thinned by a hash of their global ids to an eighth, a 64th, and
+/// so on, for subsamples of balls far wider than the subsample (see
+/// [`Thinned::neighbours`]): the same points in any tiling, found by querying a level that
+/// holds a few times as many of the ball's points as are wanted, not the whole ball.
+pub struct Thinned<'a> {
+    cloud: &'a Cloud,
+    /// Each point's hash, by stored index.
+    hash: Vec<u64>,
+    /// Level k holds the points whose hash is below 2^64 / 8^(k+1) (densest first).
+    levels: Vec<Cloud>,
+}
+
+/// Fewest points a level of [`Thinned`] holds.
+const LEVEL_MIN: usize = 1024;
+
+impl<'a> Thinned<'a> {
+    /// The levels of `cloud`, their trees built (on the rayon pool if the cloud's are).
+    pub fn new(cloud: &'a Cloud) -> Thinned<'a> {
+        use rayon::prelude::*;
+        let hash: Vec<u64> = cloud.gid.par_iter().map(|&g| crate::rng::Rng::new(g ^ 0x6E01_5EBA).next_u64()).collect();
+        let mut levels = Vec::new();
+        let mut which: Vec<u32> = (0..cloud.len() as u32).collect();
+        for k in 1..=21 {
+            which.retain(|&i| hash[i as usize] < u64::MAX >> (3 * k));
+            if which.len() < LEVEL_MIN {
+                break;
+            }
+            let level = cloud.subset(&which);
+            level.index();
+            levels.push(level);
+        }
+        Thinned { cloud, hash, levels }
+    }
+
+    /// The `max` points within `r` of local position `q` whose hashes are smallest (every
+    /// point of the ball if it holds fewer), in coordinate order, as indices of the cloud with
+    /// their squared distances: a uniform subsample, the same whichever level gave it.
+    pub fn neighbours(&self, q: DVec3, r: f64, max: usize, out: &mut Vec<(u32, f32)>) {
+        let nb = Neighbourhood { radius: r, reach: f64::INFINITY, min: 0, max: usize::MAX, ordered: false };
+        // (From the sparsest level up: a level whose ball holds at least `max` points holds
+        // every point of the ball with a smaller hash than its `max`th.)
+        let mut found = false;
+        for level in self.levels.iter().rev() {
+            level.neighbours_in(q, nb, out);
+            if out.len() >= max {
+                for a in out.iter_mut() {
+                    a.0 = level.ids[a.0 as usize];
+                }
+                found = true;
+                break;
+            }
+        }
+        if !found {
+            self.cloud.neighbours_in(q, nb, out);
+        }
+        if out.len() > max {
+            let key = |a: &(u32, f32)| (self.hash[a.0 as usize], self.cloud.gid[a.0 as usize]);
+            out.select_nth_unstable_by_key(max - 1, key);
+            out.truncate(max);
+        }
+        self.cloud.order_and_thin(max, true, out);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -841,5 +907,52 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A wide ball's thinned neighbours are the points of the ball with the smallest hashes,
+    /// whichever level served them: the same as taken from the whole ball, and the same in a
+    /// cloud holding only part of the points around (another tile), as long as it holds the
+    /// ball.
+    #[test]
+    fn thinned_balls_take_the_smallest_hashes_whatever_level_serves_them() {
+        let mut rng = crate::rng::Rng::stream(7, 0);
+        let world: Vec<DVec3> = (0..120_000).map(|_| DVec3::new(rng.f64(), rng.f64(), 0.01 * rng.f64())).collect();
+        let gids: Vec<u64> = (0..world.len() as u64).map(|g| g * 7 + 3).collect();
+        let cloud = Cloud::with_origin(&world, &gids, DVec3::ZERO);
+        let thinned = Thinned::new(&cloud);
+        assert!(thinned.levels.len() >= 2, "{} levels", thinned.levels.len());
+        // The left half of the points only, with another origin.
+        let part: Vec<usize> = (0..world.len()).filter(|&k| world[k].x < 0.5).collect();
+        let (pw, pg): (Vec<DVec3>, Vec<u64>) = part.iter().map(|&k| (world[k], gids[k])).unzip();
+        let other = Cloud::with_origin(&pw, &pg, DVec3::new(-0.5, 0.25, -1.0));
+        let other_thinned = Thinned::new(&other);
+        let max = 128;
+        let (mut out, mut all, mut theirs) = (Vec::new(), Vec::new(), Vec::new());
+        let mut levels_used = std::collections::BTreeSet::new();
+        let mut in_other = 0;
+        for (k, r) in [(11, 0.02), (503, 0.05), (1999, 0.1), (7001, 0.2), (40_000, 0.12)] {
+            let q = cloud.at(k);
+            thinned.neighbours(q, r, max, &mut out);
+            cloud.neighbours_in(q, Neighbourhood { radius: r, reach: f64::INFINITY, min: 0, max: usize::MAX, ordered: false }, &mut all);
+            let mut expected: Vec<u64> = all.iter().map(|a| cloud.gid[a.0 as usize]).collect();
+            expected.sort_unstable_by_key(|&g| (crate::rng::Rng::new(g ^ 0x6E01_5EBA).next_u64(), g));
+            expected.truncate(max);
+            expected.sort_unstable();
+            let mut got: Vec<u64> = out.iter().map(|a| cloud.gid[a.0 as usize]).collect();
+            assert!(out.windows(2).all(|w| cloud.coordinate_order(w[0].0, w[1].0).is_lt()));
+            got.sort_unstable();
+            assert_eq!(got, expected, "ball {k} of radius {r}");
+            levels_used.insert((all.len() / 8 >= max) as u8 + (all.len() / 64 >= max) as u8);
+            let world_q = q + cloud.origin;
+            if world_q.x + r < 0.5 {
+                other_thinned.neighbours(world_q - other.origin, r, max, &mut theirs);
+                let mut g: Vec<u64> = theirs.iter().map(|a| other.gid[a.0 as usize]).collect();
+                g.sort_unstable();
+                assert_eq!(g, got, "ball {k} in the other cloud");
+                in_other += 1;
+            }
+        }
+        assert!(levels_used.len() >= 3, "levels used: {levels_used:?}");
+        assert!(in_other >= 1, "no ball lay in the other cloud");
     }
 }

@@ -8,7 +8,7 @@
 //! ball.
 
 use super::fit::{self, Pca};
-use super::neighbourhood::Cloud;
+use super::neighbourhood::{Cloud, Thinned};
 use crate::keys::{keep_point, position_key};
 use crate::points::{Bounds, TilePoints};
 use crate::tiles::within;
@@ -50,14 +50,16 @@ pub fn stat_sample(key: u64, total: u64, seed: u64) -> bool {
 /// ball takes in more of the surface's curvature (8 deviations: 0.0279 at 0.02 dB, whose
 /// deviation is 0.0242).
 pub const NOISE_BALL: f64 = 5.0;
-/// Most points a noise fit takes: an even subsample of a ball that holds more.
+/// Most points a noise fit takes: an even subsample of a 16-spacing ball that holds more, and
+/// a uniform one of a wider ball (its points of smallest hash, see [`Thinned`]).
 const NOISE_FIT_POINTS: usize = 128;
 
 /// Neighbourhood statistics of one sampled point: its spacing (from the 16th neighbour, see
 /// [`crate::spacing::spacing`]) and the RMS residual of a quadric fitted within 16 of those
 /// spacings, or within [`NOISE_BALL`] deviations if the deviation so measured asks for a
-/// wider ball (the noise; the ball grows up to twice). Also returns the widest radius read.
-pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<(PointStats, f64)> {
+/// wider ball (the noise; the ball grows up to twice), whose points `thinned` subsamples. Also
+/// returns the widest radius read.
+pub fn point_stats(cloud: &Cloud, thinned: &Thinned, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<(PointStats, f64)> {
     const K: usize = 16;
     buf.clear();
     // (A few more than K + 1 from the f32 tree, whose distances depend on the tile's origin in
@@ -82,7 +84,7 @@ pub fn point_stats(cloud: &Cloud, i: usize, buf: &mut Vec<(u32, f32)>) -> Option
         if round == 0 {
             cloud.neighbours(centre, radius, 0, NOISE_FIT_POINTS, buf);
         } else {
-            cloud.neighbours_thinned(centre, radius, NOISE_FIT_POINTS, buf);
+            thinned.neighbours(centre, radius, NOISE_FIT_POINTS, buf);
             reach = reach.max(centre.distance(q) + radius);
         }
         if buf.len() < 10 {
@@ -231,9 +233,10 @@ fn sample_round(tp: &TilePoints, is_core: &[bool], todo: Option<&[u64]>, reach: 
     let kept = keep.as_ref().and(reach);
     // (The tree, on the pool, which would otherwise wait for it.)
     cloud.index();
+    let thinned = Thinned::new(&cloud);
     let sample: Vec<usize> = (0..cloud.len()).into_par_iter().filter(|&i| sampled[cloud.ids[i] as usize]).collect();
     cloud.prepare_ordering(sample.len());
-    let stats: Vec<Option<(PointStats, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| point_stats(&cloud, i, buf)).collect();
+    let stats: Vec<Option<(PointStats, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| point_stats(&cloud, &thinned, i, buf)).collect();
     let mut round = Round { done: Vec::new(), again: Vec::new(), need: 0.0, wider_halo: false };
     for (&i, s) in sample.iter().zip(stats) {
         // The widest ball the statistics read (the 16-spacing ball, or the noise's), with the
@@ -295,7 +298,7 @@ fn near(xyz: &[DVec3], centre: &[bool], radius: f64) -> Option<Vec<usize>> {
 #[cfg(test)]
 mod tests {
     use super::{median, near, point_stats, NOISE_BALL};
-    use crate::extract::neighbourhood::Cloud;
+    use crate::extract::neighbourhood::{Cloud, Thinned};
     use glam::DVec3;
 
     /// The median noise measured at points near the middle of a unit square of `n` points, each
@@ -304,9 +307,10 @@ mod tests {
         let mut rng = crate::rng::Rng::stream(11, n as u64);
         let pts: Vec<DVec3> = (0..n).map(|_| DVec3::new(rng.f64(), rng.f64(), 0.0) + rng.in_ball(radius)).collect();
         let cloud = Cloud::new(&pts);
+        let thinned = Thinned::new(&cloud);
         let mut buf = Vec::new();
         let middle: Vec<usize> = (0..cloud.len()).filter(|&i| (cloud.at(i) + cloud.origin - DVec3::new(0.5, 0.5, 0.0)).length() < 0.1).take(60).collect();
-        let stats: Vec<(f64, f64)> = middle.iter().filter_map(|&i| point_stats(&cloud, i, &mut buf)).map(|(s, r)| (s.noise, r)).collect();
+        let stats: Vec<(f64, f64)> = middle.iter().filter_map(|&i| point_stats(&cloud, &thinned, i, &mut buf)).map(|(s, r)| (s.noise, r)).collect();
         let mut noise: Vec<f64> = stats.iter().map(|s| s.0).collect();
         (median(&mut noise), stats.iter().map(|s| s.1).fold(0.0, f64::max))
     }
