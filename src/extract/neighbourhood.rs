@@ -705,32 +705,35 @@ pub struct Neighbourhood {
 /// holds a few times as many of the ball's points as are wanted, not the whole ball.
 pub struct Thinned<'a> {
     cloud: &'a Cloud,
-    /// Each point's hash, by stored index.
-    hash: Vec<u64>,
     /// Level k holds the points whose hash is below 2^64 / 8^(k+1) (densest first).
     levels: Vec<Cloud>,
+}
+
+/// The hash of a point's global id by which [`Thinned`] thins a cloud.
+fn thinning_hash(gid: u64) -> u64 {
+    crate::rng::Rng::new(gid ^ 0x6E01_5EBA).next_u64()
 }
 
 /// Fewest points a level of [`Thinned`] holds.
 const LEVEL_MIN: usize = 1024;
 
 impl<'a> Thinned<'a> {
-    /// The levels of `cloud`, their trees built (on the rayon pool if the cloud's are).
+    /// The levels of `cloud`, their trees built, on the calling thread (no rayon job: see
+    /// `statistics::sample_round`).
     pub fn new(cloud: &'a Cloud) -> Thinned<'a> {
-        use rayon::prelude::*;
-        let hash: Vec<u64> = cloud.gid.par_iter().map(|&g| crate::rng::Rng::new(g ^ 0x6E01_5EBA).next_u64()).collect();
         let mut levels = Vec::new();
-        let mut which: Vec<u32> = (0..cloud.len() as u32).collect();
+        let mut which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| thinning_hash(cloud.gid[i as usize]) < u64::MAX >> 3).collect();
         for k in 1..=21 {
-            which.retain(|&i| hash[i as usize] < u64::MAX >> (3 * k));
+            which.retain(|&i| thinning_hash(cloud.gid[i as usize]) < u64::MAX >> (3 * k));
             if which.len() < LEVEL_MIN {
                 break;
             }
-            let level = cloud.subset(&which);
+            let mut level = cloud.subset(&which);
+            level.parallel = false;
             level.index();
             levels.push(level);
         }
-        Thinned { cloud, hash, levels }
+        Thinned { cloud, levels }
     }
 
     /// The `max` points within `r` of local position `q` whose hashes are smallest (every
@@ -755,9 +758,17 @@ impl<'a> Thinned<'a> {
             self.cloud.neighbours_in(q, nb, out);
         }
         if out.len() > max {
-            let key = |a: &(u32, f32)| (self.hash[a.0 as usize], self.cloud.gid[a.0 as usize]);
-            out.select_nth_unstable_by_key(max - 1, key);
-            out.truncate(max);
+            // (Each point's hash once: the selection compares each several times.)
+            let mut keyed: Vec<(u64, u64, (u32, f32))> = out
+                .iter()
+                .map(|&a| {
+                    let g = self.cloud.gid[a.0 as usize];
+                    (thinning_hash(g), g, a)
+                })
+                .collect();
+            keyed.select_nth_unstable_by_key(max - 1, |k| (k.0, k.1));
+            out.clear();
+            out.extend(keyed[..max].iter().map(|k| k.2));
         }
         self.cloud.order_and_thin(max, true, out);
     }
@@ -935,7 +946,7 @@ mod tests {
             thinned.neighbours(q, r, max, &mut out);
             cloud.neighbours_in(q, Neighbourhood { radius: r, reach: f64::INFINITY, min: 0, max: usize::MAX, ordered: false }, &mut all);
             let mut expected: Vec<u64> = all.iter().map(|a| cloud.gid[a.0 as usize]).collect();
-            expected.sort_unstable_by_key(|&g| (crate::rng::Rng::new(g ^ 0x6E01_5EBA).next_u64(), g));
+            expected.sort_unstable_by_key(|&g| (thinning_hash(g), g));
             expected.truncate(max);
             expected.sort_unstable();
             let mut got: Vec<u64> = out.iter().map(|a| cloud.gid[a.0 as usize]).collect();

@@ -57,9 +57,9 @@ const NOISE_FIT_POINTS: usize = 128;
 /// Neighbourhood statistics of one sampled point: its spacing (from the 16th neighbour, see
 /// [`crate::spacing::spacing`]) and the RMS residual of a quadric fitted within 16 of those
 /// spacings, or within [`NOISE_BALL`] deviations if the deviation so measured asks for a
-/// wider ball (the noise; the ball grows up to twice), whose points `thinned` subsamples. Also
-/// returns the widest radius read.
-pub fn point_stats(cloud: &Cloud, thinned: &Thinned, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<(PointStats, f64)> {
+/// wider ball (the noise; the ball grows up to twice), whose points `thinned()` subsamples
+/// (asked for only then). Also returns the widest radius read.
+pub fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<'c>, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<(PointStats, f64)> {
     const K: usize = 16;
     buf.clear();
     // (A few more than K + 1 from the f32 tree, whose distances depend on the tile's origin in
@@ -84,7 +84,7 @@ pub fn point_stats(cloud: &Cloud, thinned: &Thinned, i: usize, buf: &mut Vec<(u3
         if round == 0 {
             cloud.neighbours(centre, radius, 0, NOISE_FIT_POINTS, buf);
         } else {
-            thinned.neighbours(centre, radius, NOISE_FIT_POINTS, buf);
+            thinned().neighbours(centre, radius, NOISE_FIT_POINTS, buf);
             reach = reach.max(centre.distance(q) + radius);
         }
         if buf.len() < 10 {
@@ -233,10 +233,14 @@ fn sample_round(tp: &TilePoints, is_core: &[bool], todo: Option<&[u64]>, reach: 
     let kept = keep.as_ref().and(reach);
     // (The tree, on the pool, which would otherwise wait for it.)
     cloud.index();
-    let thinned = Thinned::new(&cloud);
     let sample: Vec<usize> = (0..cloud.len()).into_par_iter().filter(|&i| sampled[cloud.ids[i] as usize]).collect();
     cloud.prepare_ordering(sample.len());
-    let stats: Vec<Option<(PointStats, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| point_stats(&cloud, &thinned, i, buf)).collect();
+    // (Built by the first sample whose noise ball is wider than 16 spacings: none on a clean
+    // cloud. Serially, so that no rayon job runs inside the initialisation: a worker waiting
+    // in it could otherwise pick up another sample that waits for the same cell.)
+    let thinned = std::sync::OnceLock::new();
+    let lazy = || thinned.get_or_init(|| Thinned::new(&cloud));
+    let stats: Vec<Option<(PointStats, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| point_stats(&cloud, lazy, i, buf)).collect();
     let mut round = Round { done: Vec::new(), again: Vec::new(), need: 0.0, wider_halo: false };
     for (&i, s) in sample.iter().zip(stats) {
         // The widest ball the statistics read (the 16-spacing ball, or the noise's), with the
@@ -310,7 +314,7 @@ mod tests {
         let thinned = Thinned::new(&cloud);
         let mut buf = Vec::new();
         let middle: Vec<usize> = (0..cloud.len()).filter(|&i| (cloud.at(i) + cloud.origin - DVec3::new(0.5, 0.5, 0.0)).length() < 0.1).take(60).collect();
-        let stats: Vec<(f64, f64)> = middle.iter().filter_map(|&i| point_stats(&cloud, &thinned, i, &mut buf)).map(|(s, r)| (s.noise, r)).collect();
+        let stats: Vec<(f64, f64)> = middle.iter().filter_map(|&i| point_stats(&cloud, || &thinned, i, &mut buf)).map(|(s, r)| (s.noise, r)).collect();
         let mut noise: Vec<f64> = stats.iter().map(|s| s.0).collect();
         (median(&mut noise), stats.iter().map(|s| s.1).fold(0.0, f64::max))
     }
