@@ -157,25 +157,32 @@ pub struct StatsTile {
 }
 
 /// Statistics of the sampled points in a tile's core, in global id order, given the tile
-/// `first` loaded with halo `tile.halo` (with core flags); `reload(halo)` loads it again with a
-/// wider halo.
+/// `first` loaded with halo `loaded`, at least `tile.halo` (with core flags); `reload(halo)`
+/// loads it again with a wider halo. Also returns the widest halo that the samples' noise
+/// balls asked for (at most [`STATS_HALO_GROWTH`] times `tile.halo`; `loaded` if none asked for
+/// more), with which the next tiles may be first loaded: the statistics do not depend on the
+/// halo a tile is loaded with, only the work does.
 ///
 /// A sample's neighbourhood is 16 of its own spacings wide, or wider under noise (see
 /// [`NOISE_BALL`]), so it can reach past the halo, and then it would depend on where the tile
 /// borders fall. Such samples are computed again with the tile reloaded with a halo wide
-/// enough for them (up to [`STATS_HALO_GROWTH`] times the first).
+/// enough for them (up to [`STATS_HALO_GROWTH`] times `tile.halo`).
 pub fn tile_statistics(
     first: (TilePoints, Vec<bool>),
+    loaded: f64,
     tile: &StatsTile,
     mut reload: impl FnMut(f64) -> crate::Result<(TilePoints, Vec<bool>)>,
-) -> crate::Result<Vec<PointStats>> {
+) -> crate::Result<(Vec<PointStats>, f64)> {
     let cap = STATS_HALO_GROWTH * tile.halo;
     let (mut tp, mut is_core) = first;
-    let mut halo = tile.halo;
+    let mut halo = loaded.max(tile.halo);
+    // (Not the halo of samples too sparse to tell how far their neighbours lie: at most a few
+    // isolated points, which would have every later tile loaded with the widest halo.)
+    let mut asked = halo;
     // Only the points within `reach` of a sample are indexed (None: all of them). A tile holds a
     // few hundred samples at 100 M points, and their neighbourhoods a fifth of the points or
     // less. A sample whose ball turns out wider is computed again with a wider reach.
-    let mut reach = Some(tile.halo);
+    let mut reach = Some(halo);
     let mut todo: Option<Vec<u64>> = None;
     let mut done: Vec<(u64, PointStats)> = Vec::new();
     loop {
@@ -185,6 +192,9 @@ pub fn tile_statistics(
             break;
         }
         reach = if round.need.is_finite() { reach.map(|k| (1.01 * round.need).max(2.0 * k)) } else { None };
+        if round.need.is_finite() {
+            asked = asked.max((1.01 * round.need).min(cap));
+        }
         if round.wider_halo {
             halo = (1.01 * round.need).max(2.0 * halo).min(cap);
             (tp, is_core) = reload(halo)?;
@@ -192,7 +202,7 @@ pub fn tile_statistics(
         todo = Some(round.again);
     }
     done.sort_unstable_by_key(|d| d.0);
-    Ok(done.into_iter().map(|d| d.1).collect())
+    Ok((done.into_iter().map(|d| d.1).collect(), asked))
 }
 
 /// What one round of [`tile_statistics`] settled, and what it left for a wider one.

@@ -876,16 +876,26 @@ impl<'a> Run<'a> {
         let seed = params.seed.unwrap_or(crate::extract::params::DEFAULT_SEED);
         let loading = |halo| Loading { halo, keep: 1.0, evaluate: 1.0, seed, key_quantum: self.kq, counts: tile_points, average: 0.0, average_share: 1.0 };
         let halo0 = 24.0 * kappa0;
+        // The widest halo that the noise balls of the tiles computed so far asked for: the
+        // tiles loaded after them start with it rather than loading twice. (Which tiles do
+        // depends on timing; what they compute does not.)
+        let asked = std::sync::atomic::AtomicU64::new(halo0.to_bits());
         // (The pool has little to do here but wait for the next tile, so the tile is indexed
         // on the pool, not on the loader thread as in the passes below.)
         let time = tile_pass(
             &self.context(),
             "statistics",
             &self.share(),
-            |t, _| pass::load(store, grid, t, &loading(halo0)),
-            |t, first| {
+            |t, _| {
+                let halo = f64::from_bits(asked.load(std::sync::atomic::Ordering::Relaxed));
+                pass::load(store, grid, t, &loading(halo)).map(|first| (first, halo))
+            },
+            |t, (first, loaded)| {
                 let tile = StatsTile { core: grid.core(t), halo: halo0, key_quantum: self.kq, total, seed };
-                statistics::tile_statistics(first, &tile, |halo| pass::load(store, grid, t, &loading(halo))).map(Stats)
+                let (stats, wider) = statistics::tile_statistics(first, loaded, &tile, |halo| pass::load(store, grid, t, &loading(halo)))?;
+                // (The bits of positive numbers order as the numbers do.)
+                asked.fetch_max(wider.to_bits(), std::sync::atomic::Ordering::Relaxed);
+                Ok(Stats(stats))
             },
         )?;
         self.pass.statistics_load = time.load;
