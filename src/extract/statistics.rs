@@ -24,6 +24,12 @@ pub const STAT_SAMPLES: f64 = 20_000.0;
 /// 24). Samples whose neighbourhood is wider still (isolated points) keep what the widest
 /// halo holds.
 pub const STATS_HALO_GROWTH: f64 = 16.0;
+/// The widest halo, in first halos, that later tiles are first loaded with because earlier
+/// ones asked for it (see [`tile_statistics`]): enough for the noise balls of 10 M points of
+/// fandisk at 0.01 dB (3-3.4), and bounded so that a cloud whose sparse patches ask for the
+/// widest halo does not have every tile held that wide, two at a time (the one computed and
+/// the one loaded meanwhile). A tile that needs more is loaded again, as before.
+pub const STATS_HALO_HINT: f64 = 4.0;
 
 /// What one sampled point says about the cloud.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -159,7 +165,7 @@ pub struct StatsTile {
 /// Statistics of the sampled points in a tile's core, in global id order, given the tile
 /// `first` loaded with halo `loaded`, at least `tile.halo` (with core flags); `reload(halo)`
 /// loads it again with a wider halo. Also returns the widest halo that the samples' noise
-/// balls asked for (at most [`STATS_HALO_GROWTH`] times `tile.halo`; `loaded` if none asked for
+/// balls asked for (at most [`STATS_HALO_HINT`] times `tile.halo`; `loaded` if none asked for
 /// more), with which the next tiles may be first loaded: the statistics do not depend on the
 /// halo a tile is loaded with, only the work does.
 ///
@@ -193,7 +199,7 @@ pub fn tile_statistics(
         }
         reach = if round.need.is_finite() { reach.map(|k| (1.01 * round.need).max(2.0 * k)) } else { None };
         if round.need.is_finite() {
-            asked = asked.max((1.01 * round.need).min(cap));
+            asked = asked.max((1.01 * round.need).min(STATS_HALO_HINT * tile.halo));
         }
         if round.wider_halo {
             halo = (1.01 * round.need).max(2.0 * halo).min(cap);
