@@ -92,7 +92,8 @@ impl Cloud {
     }
 
     /// The points `which` (stored indices, in increasing order) as a cloud of their own, with
-    /// the same local coordinates; its `ids` are their stored indices in this cloud.
+    /// the same local coordinates; its `ids` are their stored indices in this cloud. Its tree is
+    /// built serially (see [`Thinned::new`]).
     pub fn subset(&self, which: &[u32]) -> Cloud {
         Cloud {
             origin: self.origin,
@@ -100,7 +101,7 @@ impl Cloud {
             ids: which.to_vec(),
             gid: which.iter().map(|&i| self.gid[i as usize]).collect(),
             index: std::sync::OnceLock::new(),
-            parallel: self.parallel,
+            parallel: false,
             cells: None,
             rank: std::sync::OnceLock::new(),
             slack: self.slack,
@@ -722,16 +723,16 @@ impl<'a> Thinned<'a> {
     /// `statistics::sample_round`).
     pub fn new(cloud: &'a Cloud) -> Thinned<'a> {
         let mut levels = Vec::new();
-        let mut which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| thinning_hash(cloud.gid[i as usize]) < u64::MAX >> 3).collect();
-        for k in 1..=21 {
-            which.retain(|&i| thinning_hash(cloud.gid[i as usize]) < u64::MAX >> (3 * k));
+        let below = |i: u32, k: u32| thinning_hash(cloud.gid[i as usize]) < u64::MAX >> (3 * k);
+        let mut which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| below(i, 1)).collect();
+        for k in 2..=21 {
             if which.len() < LEVEL_MIN {
                 break;
             }
-            let mut level = cloud.subset(&which);
-            level.parallel = false;
+            let level = cloud.subset(&which);
             level.index();
             levels.push(level);
+            which.retain(|&i| below(i, k));
         }
         Thinned { cloud, levels }
     }

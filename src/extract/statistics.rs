@@ -182,8 +182,6 @@ pub fn tile_statistics(
     let cap = STATS_HALO_GROWTH * tile.halo;
     let (mut tp, mut is_core) = first;
     let mut halo = loaded.max(tile.halo);
-    // (Not the halo of samples too sparse to tell how far their neighbours lie: at most a few
-    // isolated points, which would have every later tile loaded with the widest halo.)
     let mut asked = halo;
     // Only the points within `reach` of a sample are indexed (None: all of them). A tile holds a
     // few hundred samples at 100 M points, and their neighbourhoods a fifth of the points or
@@ -198,6 +196,8 @@ pub fn tile_statistics(
             break;
         }
         reach = if round.need.is_finite() { reach.map(|k| (1.01 * round.need).max(2.0 * k)) } else { None };
+        // (Not the halo of samples too sparse to tell how far their neighbours lie: at most a
+        // few isolated points, which would have every later tile loaded with the widest halo.)
         if round.need.is_finite() {
             asked = asked.max((1.01 * round.need).min(STATS_HALO_HINT * tile.halo));
         }
