@@ -23,7 +23,7 @@ meshes=../shared/data/meshes
 echo "| cloud | noise | curves (truth) | recall | resolvable recall (share) | precision | mean dB | max dB | seconds |"
 echo "|---|---|---|---|---|---|---|---|---|"
 noise_args() { case $1 in k*) echo "--noise-spacing ${1#k}" ;; *) echo "--noise $1" ;; esac; }
-cloud() { # path, then the `crease synth` arguments; written aside, then moved into place
+make_cloud() { # path, then the `crease synth` arguments; written aside, then moved into place
   local c=$1 part=${1%.las}.part$$.las; shift
   [ -f "$c" ] && return
   "$bin" synth "$@" -o "$part" 2>/dev/null
@@ -60,13 +60,13 @@ PY
 for noise in $noises; do
   for s in cube chamfer holecube cylinder step octahedron fandisk plate blade; do
     c=$work/${s}_${noise}.las
-    cloud "$c" shape $s -n $n $(noise_args $noise)
+    make_cloud "$c" shape $s -n $n $(noise_args $noise)
     row $s $noise "$c" "${c%.las}.truth.obj"
   done
   if [ -d "$meshes" ]; then
     for m in anchor part joint turbine pinion; do
       c=$work/${m}_${noise}.las
-      cloud "$c" mesh "$meshes/$m.off" -n $n $(noise_args $noise)
+      make_cloud "$c" mesh "$meshes/$m.off" -n $n $(noise_args $noise)
       row $m $noise "$c" "${c%.las}.truth.obj"
     done
   fi
@@ -74,12 +74,12 @@ done
 case " $noises " in *" 0 "*) ;; *) exit 0 ;; esac
 for a in 25 45 60 90 110 140 150 160 170; do
   c=$work/wedge${a}.las
-  cloud "$c" shape wedge --angle $a -n $n
+  make_cloud "$c" shape wedge --angle $a -n $n
   row wedge$a 0 "$c" "${c%.las}.truth.obj"
 done
 for kind in "--outliers 0.05" "--sampling scanlines" "--sampling nonuniform"; do
   tag=$(echo $kind | tr -d ' -')
   c=$work/fandisk_${tag}.las
-  cloud "$c" shape fandisk -n $n $kind
+  make_cloud "$c" shape fandisk -n $n $kind
   row fandisk_$tag 0 "$c" "${c%.las}.truth.obj"
 done
