@@ -5,7 +5,8 @@
 //! optionally `classification` or `class`; quotes and a leading `//` allowed) says where the
 //! columns are; otherwise x, y and z are the first three values. A line holding a single
 //! integer is a PTS block's point count and is skipped. A data line that lacks a column, or
-//! whose value is not a number, is an error naming the line.
+//! whose value is not a number, is an error naming the line, as is a line longer than
+//! [`MAX_LINE`]. Windows line ends (CRLF) and a UTF-8 byte order mark are read as text.
 
 use crate::error::{io_input, Error, Result};
 use crate::points::{Bounds, CloudHeader, Crs, FileFormat, PointChunk, Precision};
@@ -49,8 +50,15 @@ impl TextColumns {
     }
 }
 
+/// Longest line read, in bytes: a point's line holds a few dozen values at most; a longer one
+/// is not a point cloud's (a binary file, or one without line ends, that would be held whole).
+pub const MAX_LINE: usize = 64 * 1024;
+
+/// The UTF-8 byte order mark, which some Windows programs write before the first line.
+const BOM: &[u8] = &[0xEF, 0xBB, 0xBF];
+
 fn tokens(line: &str) -> impl Iterator<Item = &str> {
-    line.split([' ', '\t', ',', ';']).filter(|t| !t.is_empty())
+    line.split([' ', '\t', ',', ';', '\r']).filter(|t| !t.is_empty())
 }
 
 /// The columns a header line names, if it is one (some value is not a number).
@@ -90,7 +98,10 @@ impl TextReader {
         let cols = match spec {
             Some(c) => c,
             None => {
-                let first = map.split(|&b| b == b'\n').next().unwrap_or(&[]);
+                let first = map.strip_prefix(BOM).unwrap_or(&map).split(|&b| b == b'\n').next().unwrap_or(&[]);
+                if first.len() > MAX_LINE {
+                    return Err(Error::input(path, format!("line 1 is longer than {MAX_LINE} bytes: not a text point cloud")));
+                }
                 let first = std::str::from_utf8(first).map_err(|_| Error::input(path, "line 1 is not text: not a text point cloud"))?;
                 from_names(first).unwrap_or(TextColumns { xyz: [0, 1, 2], class: None, skip: 0 })
             }
@@ -107,7 +118,8 @@ impl TextReader {
             precision: Precision::Float(52),
             scanners: vec![],
         };
-        Ok(TextReader { path: path.to_path_buf(), header, map: Some(map), cols, pos: 0, line: 0, next: 0 })
+        let pos = if map.starts_with(BOM) { BOM.len() } else { 0 };
+        Ok(TextReader { path: path.to_path_buf(), header, map: Some(map), cols, pos, line: 0, next: 0 })
     }
 
     /// The file's header (count and bounds unknown until the points are read).
@@ -123,7 +135,10 @@ impl TextReader {
         let start = self.pos;
         let mut read = 0;
         while read < max && self.pos < bytes.len() {
-            let end = bytes[self.pos..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |k| self.pos + k);
+            let scan = &bytes[self.pos..bytes.len().min(self.pos + MAX_LINE + 1)];
+            let Some(end) = scan.iter().position(|&b| b == b'\n').map(|k| self.pos + k).or((scan.len() <= MAX_LINE).then_some(bytes.len())) else {
+                return Err(Error::input(&self.path, format!("line {} is longer than {MAX_LINE} bytes: not a text point cloud", self.line + 1)));
+            };
             let raw = &bytes[self.pos..end];
             self.pos = end + 1;
             self.line += 1;

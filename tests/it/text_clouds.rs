@@ -27,7 +27,10 @@ fn text_clouds_give_the_curves_of_the_same_points_in_ply() {
         writeln!(csv, "{i};{};{};{};2", p.x, p.y, p.z).unwrap();
         writeln!(spec, "{},{},{},{}", p.z, p.y, 6, p.x).unwrap();
     }
+    // (As a Windows program writes it: a byte order mark, and CRLF line ends.)
+    let windows = format!("\u{feff}{}", xyz.replace('\n', "\r\n"));
     let files = [
+        ("windows.xyz", windows, vec![]),
         ("cube.xyz", xyz, vec![]),
         ("cube.pts", pts, vec![]),
         ("cube.csv", csv, vec!["--classes", "2"]),
@@ -50,9 +53,12 @@ fn text_clouds_give_the_curves_of_the_same_points_in_ply() {
     let (code, err) = crease(&["extract", d.path().join("cube.csv").to_str().unwrap(), "-o", d.path().join("none").to_str().unwrap(), "-q", "--classes", "3"]);
     assert_eq!(code, crease::error::exit::DATA, "{err}");
 
-    for (name, text, says) in
-        [("short.xyz", "0 0 0\n1 1\n", "line 2 has 2 values"), ("word.csv", "x,y,z\n1,2,three\n", "line 2: 'three' in column 2 is not a number")]
-    {
+    let long = format!("0 0 0\n1 1 1\n{}\n", "7 ".repeat(64 * 1024));
+    for (name, text, says) in [
+        ("short.xyz", "0 0 0\n1 1\n", "line 2 has 2 values"),
+        ("word.csv", "x,y,z\n1,2,three\n", "line 2: 'three' in column 2 is not a number"),
+        ("long.xyz", long.as_str(), "line 3 is longer than"),
+    ] {
         let p = d.path().join(name);
         std::fs::write(&p, text).unwrap();
         let (code, err) = crease(&["info", p.to_str().unwrap()]);
