@@ -108,20 +108,7 @@ struct ParamArgs {
 
 impl ParamArgs {
     fn params(&self) -> Result<crease::extract::Params, Error> {
-        for (name, v) in [
-            ("kappa", self.kappa),
-            ("fit-radius", self.fit_radius),
-            ("rmls-radius", self.rmls_radius),
-            ("step", self.step),
-            ("evaluate-per-fit", self.evaluate_per_fit),
-        ] {
-            if let Some(v) = v
-                && !(v > 0.0 && v.is_finite())
-            {
-                return Err(Error::Usage(format!("--{name} must be a positive number")));
-            }
-        }
-        Ok(crease::extract::Params {
+        let p = crease::extract::Params {
             kappa: self.kappa,
             fit_radius: self.fit_radius,
             rmls_radius: self.rmls_radius,
@@ -131,7 +118,9 @@ impl ParamArgs {
             min_angle_deg: self.min_angle,
             seed: self.seed,
             evaluate_per_fit: self.evaluate_per_fit,
-        })
+        };
+        p.validate()?;
+        Ok(p)
     }
 }
 
@@ -425,6 +414,9 @@ fn run(cli: Cli) -> Result<(), Error> {
     Ok(())
 }
 
+/// Most worker threads a core may be given: more only adds switching and memory.
+const MAX_THREADS_PER_CORE: usize = 4;
+
 /// The arguments of `crease extract`.
 #[derive(Args)]
 struct ExtractArgs {
@@ -598,24 +590,17 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         a_srs,
         outside,
     } = a;
-    if !(0.0..=1.0).contains(&min_confidence) {
-        return Err(Error::Usage("--min-confidence must be between 0 and 1".into()));
-    }
-    if !(min_length >= 0.0 && min_length.is_finite()) {
-        return Err(Error::Usage("--min-length must be a length of 0 or more".into()));
-    }
     if let Some(n) = threads {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if n > MAX_THREADS_PER_CORE * cores {
+            return Err(Error::Usage(format!("--threads {n}: at most {} on this machine ({MAX_THREADS_PER_CORE} a core)", MAX_THREADS_PER_CORE * cores)));
+        }
         rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
     }
     if out.as_os_str() == "-" {
         return Err(Error::Usage(
             "-o -: crease writes a run directory of several files, not a stream; name a directory (use --json for a summary on stdout)".into(),
         ));
-    }
-    if let Some(t) = tile_size
-        && !(t > 0.0 && t.is_finite())
-    {
-        return Err(Error::Usage("--tile-size must be a positive number".into()));
     }
     let cancel = crease::cancel::Cancel::default();
     let _ = ctrlc::set_handler({
@@ -641,6 +626,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
         clean,
         block_steps,
     };
+    opts.validate()?;
     let params = params.params()?;
     let jobs: Vec<(Vec<PathBuf>, PathBuf, Option<PathBuf>)> = if per_file {
         input_files(&paths, recursive)?

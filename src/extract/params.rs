@@ -171,6 +171,49 @@ impl Resolved {
 }
 
 impl Params {
+    /// Checks every value given, with the message the command line shows for it: lengths
+    /// positive and finite, tau finite and 0 or more, the largest turn above 0 and at most 180
+    /// degrees, the gentlest crease from 0 to below 180 degrees. Every entry point calls it.
+    ///
+    /// ```
+    /// use crease::extract::Params;
+    /// assert!(Params::default().validate().is_ok());
+    /// let bad = Params { kappa: Some(-1.0), ..Params::default() };
+    /// assert_eq!(bad.validate().unwrap_err().to_string(), "--kappa must be a positive number");
+    /// ```
+    pub fn validate(&self) -> crate::Result<()> {
+        let refuse = |m: &str| Err(crate::Error::Usage(m.to_string()));
+        for (name, v) in [
+            ("kappa", self.kappa),
+            ("fit-radius", self.fit_radius),
+            ("rmls-radius", self.rmls_radius),
+            ("step", self.step),
+            ("evaluate-per-fit", self.evaluate_per_fit),
+        ] {
+            if let Some(v) = v
+                && !(v > 0.0 && v.is_finite())
+            {
+                return refuse(&format!("--{name} must be a positive number"));
+            }
+        }
+        if let Some(t) = self.tau
+            && !(t >= 0.0 && t.is_finite())
+        {
+            return refuse("--tau must be a residual of 0 or more");
+        }
+        if let Some(a) = self.max_turn_deg
+            && !(a > 0.0 && a <= 180.0)
+        {
+            return refuse("--max-turn must be an angle above 0 and at most 180 degrees");
+        }
+        if let Some(a) = self.min_angle_deg
+            && !(a >= 0.0 && a < 180.0)
+        {
+            return refuse("--min-angle must be an angle from 0 to below 180 degrees");
+        }
+        Ok(())
+    }
+
     /// The same parameters with those given at their default value left unset, so that a job
     /// that names a default (`--seed 1`) is the job that does not.
     pub fn without_defaults(&self) -> Params {

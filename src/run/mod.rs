@@ -164,6 +164,44 @@ impl Default for RunOptions {
     }
 }
 
+/// The smallest memory budget a run takes: a tile, its tree and the curve stage's blocks need
+/// some room whatever the input.
+pub const MIN_MEMORY: u64 = 64 << 20;
+
+impl RunOptions {
+    /// Checks the options, with the message the command line shows for each: a memory budget
+    /// of at least [`MIN_MEMORY`], a positive finite tile size and block side, a confidence
+    /// from 0 to 1, a finite length of 0 or more. Every entry point calls it.
+    ///
+    /// ```
+    /// use crease::run::RunOptions;
+    /// assert!(RunOptions::default().validate().is_ok());
+    /// let bad = RunOptions { min_confidence: 2.0, ..RunOptions::default() };
+    /// assert_eq!(bad.validate().unwrap_err().to_string(), "--min-confidence must be between 0 and 1");
+    /// ```
+    pub fn validate(&self) -> Result<()> {
+        let refuse = |m: String| Err(Error::Usage(m));
+        if self.memory < MIN_MEMORY {
+            return refuse(format!("--memory must be at least {} MiB", MIN_MEMORY >> 20));
+        }
+        if let Some(t) = self.tile_size
+            && !(t > 0.0 && t.is_finite())
+        {
+            return refuse("--tile-size must be a positive number".into());
+        }
+        if !(0.0..=1.0).contains(&self.min_confidence) {
+            return refuse("--min-confidence must be between 0 and 1".into());
+        }
+        if !(self.min_length >= 0.0 && self.min_length.is_finite()) {
+            return refuse("--min-length must be a length of 0 or more".into());
+        }
+        if !(self.block_steps > 0.0 && self.block_steps.is_finite()) {
+            return refuse("--block-steps must be a positive number".into());
+        }
+        Ok(())
+    }
+}
+
 /// What `report.json` holds.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
@@ -329,6 +367,8 @@ pub fn run_worker(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filt
 
 fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts: &RunOptions, worker: Option<Worker>) -> Result<WorkerStep> {
     let t0 = Instant::now();
+    params.validate()?;
+    opts.validate()?;
     // (An input directory that is also the run directory holds the run's own curves.ply: a
     // second run would read it as points.)
     let run_dir = dir.canonicalize().ok();
@@ -529,6 +569,8 @@ fn coarse_coordinates(h: &crate::points::CloudHeader, grid: &Grid, kappa: f64) -
 /// # Ok::<(), crease::Error>(())
 /// ```
 pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Result<Extraction> {
+    params.validate()?;
+    opts.validate()?;
     let here = PathBuf::from("<memory>");
     let job = Job {
         version: env!("CARGO_PKG_VERSION").to_string(),

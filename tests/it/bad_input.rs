@@ -478,3 +478,37 @@ fn recursive_directories_json_summaries_and_no_stream_output() {
     assert!(err.contains("-o -: crease writes a run directory"), "{err}");
     assert!(!Path::new("-").exists());
 }
+
+/// Out-of-range options are refused by the library, with the message the command line gives
+/// (exit 2, nothing written), before any point is read.
+#[test]
+fn options_out_of_range_are_refused_by_the_library_as_by_the_command_line() {
+    use crease::extract::Params;
+    use crease::run::RunOptions;
+    let d = tmp();
+    let las = d.path().join("tiny.las");
+    small_las(&las, 100);
+    let points = vec![glam::DVec3::ZERO; 10];
+    let cases: Vec<(&[&str], Params, RunOptions, &str)> = vec![
+        (&["--kappa=-1"], Params { kappa: Some(-1.0), ..Default::default() }, RunOptions::default(), "--kappa must be a positive number"),
+        (&["--max-turn=NaN"], Params { max_turn_deg: Some(f64::NAN), ..Default::default() }, RunOptions::default(), "--max-turn must be an angle"),
+        (&["--max-turn=-5"], Params { max_turn_deg: Some(-5.0), ..Default::default() }, RunOptions::default(), "--max-turn must be an angle"),
+        (&["--min-angle=400"], Params { min_angle_deg: Some(400.0), ..Default::default() }, RunOptions::default(), "--min-angle must be an angle"),
+        (&["--tau=inf"], Params { tau: Some(f64::INFINITY), ..Default::default() }, RunOptions::default(), "--tau must be a residual"),
+        (&["--tau=-1"], Params { tau: Some(-1.0), ..Default::default() }, RunOptions::default(), "--tau must be a residual"),
+        (&["--min-confidence=2"], Params::default(), RunOptions { min_confidence: 2.0, ..Default::default() }, "--min-confidence must be between 0 and 1"),
+        (&["--memory=1K"], Params::default(), RunOptions { memory: 1024, ..Default::default() }, "--memory must be at least"),
+    ];
+    for (args, params, opts, says) in cases {
+        let lib = crease::run::extract_cloud(&points, &params, &opts).err().expect("refused").to_string();
+        assert!(lib.contains(says), "{args:?}: library said {lib}");
+        let out = d.path().join("run");
+        let (code, _, err) = crease(&[&["extract", las.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"][..], args].concat());
+        assert_eq!(code, exit::USAGE, "{args:?}: {err}");
+        assert_eq!(err.trim_end(), format!("crease: error: {lib}"), "{args:?}: the command line and the library differ");
+        assert!(!out.exists(), "{args:?}: a run directory was made");
+    }
+    let (code, _, err) = crease(&["extract", las.to_str().unwrap(), "-o", d.path().join("t").to_str().unwrap(), "-q", "--threads", "10000"]);
+    assert_eq!(code, exit::USAGE, "{err}");
+    assert!(err.contains("--threads 10000: at most"), "{err}");
+}
