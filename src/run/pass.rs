@@ -155,6 +155,7 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
             store.read_near(n, Some((&core, reach)), &mut tp, |p, _| within(&core, reach, p) && read(p))?;
         }
     }
+    let own = drop_duplicates(&mut tp, own);
     let is_core = |k: usize, p: DVec3| {
         // (A key of its own, so that which points are evaluated does not follow which are kept.)
         own.contains(&k) && (l.evaluate >= 1.0 || keep_point(position_key(p, l.key_quantum) ^ 0xE7A1_0A7E, l.evaluate, l.seed))
@@ -179,6 +180,33 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
     let out = TilePoints { xyz, gid: chosen.iter().map(|&k| tp.gid[k]).collect() };
     let flags = chosen.iter().map(|&k| is_core(k, tp.xyz[k])).collect();
     Ok((out, flags))
+}
+
+/// Drops every point of `tp` at the very position of another with a smaller global id (scans
+/// that overlap, tiles merged twice): a copy adds nothing to a fit but weight, and ten copies
+/// of every point made the spacing, measured from the 16th neighbour, a third of the true one.
+/// Every copy of a point lies in the tiles that read any of them, so each keeps the same one.
+/// Returns where the tile's own points, `own` before, now are.
+fn drop_duplicates(tp: &mut TilePoints, own: std::ops::Range<usize>) -> std::ops::Range<usize> {
+    // (0.0 added: -0.0 and 0.0 are the same position.)
+    let bits = |p: DVec3| [(p.x + 0.0).to_bits(), (p.y + 0.0).to_bits(), (p.z + 0.0).to_bits()];
+    let mut order: Vec<([u64; 3], u64, u32)> = tp.xyz.par_iter().zip(&tp.gid).enumerate().map(|(k, (&p, &g))| (bits(p), g, k as u32)).collect();
+    order.par_sort_unstable();
+    let copy: Vec<u32> = order.windows(2).filter(|w| w[0].0 == w[1].0).map(|w| w[1].2).collect();
+    if copy.is_empty() {
+        return own;
+    }
+    let mut keep = vec![true; tp.xyz.len()];
+    for k in copy {
+        keep[k as usize] = false;
+    }
+    let before = |end: usize| keep[..end].iter().filter(|&&k| k).count();
+    let own = before(own.start)..before(own.end);
+    let mut k = 0;
+    tp.xyz.retain(|_| (keep[k], k += 1).0);
+    k = 0;
+    tp.gid.retain(|_| (keep[k], k += 1).0);
+    own
 }
 
 /// Means of the points within a radius of a position, the same to the bit whichever tile

@@ -8,6 +8,7 @@ mod bad_input;
 mod cli;
 mod copc;
 mod crs;
+mod dirty;
 mod e57;
 mod extract;
 mod ply_and_curves;

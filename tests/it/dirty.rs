@@ -1,0 +1,47 @@
+//! Dirty real data: copies of points (overlapping scans, tiles merged twice) change nothing.
+
+use glam::DVec3;
+use std::path::Path;
+use std::process::Command;
+
+fn extract(input: &Path, out: &Path) -> Vec<u8> {
+    let run = Command::new(env!("CARGO_BIN_EXE_crease")).args(["extract", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]).output().unwrap();
+    assert!(run.status.success(), "{}: {}", input.display(), String::from_utf8_lossy(&run.stderr));
+    std::fs::read(out.join("curves.obj")).unwrap()
+}
+
+fn write_ply(path: &Path, points: &[DVec3]) {
+    let mut w = crease::io::PointWriter::create(path, &crease::io::WriteOptions { scale: 1e-6, offset: DVec3::ZERO, epsg: None }).unwrap();
+    w.write(points, &vec![0; points.len()]).unwrap();
+    w.finish().unwrap();
+}
+
+/// A cube whose every point is written ten times, and one with 20 k copies of a single point
+/// added, give the cube's 12 curves where the cube alone gives them. (Not to the byte: the
+/// statistics sample is drawn at a rate set by the point count, copies included.)
+#[test]
+fn copies_of_points_change_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let plain = d.path().join("cube.ply");
+    write_ply(&plain, &cube);
+    extract(&plain, &d.path().join("run_plain"));
+    assert_eq!(crease::curves::read_obj(&d.path().join("run_plain/curves.obj")).unwrap().len(), 12);
+    let tenfold: Vec<DVec3> = (0..10).flat_map(|_| cube.iter().copied()).collect();
+    let one_point: Vec<DVec3> = cube.iter().copied().chain(std::iter::repeat_n(cube[17], 20_000)).collect();
+    for (name, points) in [("tenfold.ply", tenfold), ("one_point.ply", one_point)] {
+        let p = d.path().join(name);
+        write_ply(&p, &points);
+        let run = d.path().join(format!("run_{name}"));
+        extract(&p, &run);
+        assert_eq!(crease::curves::read_obj(&run.join("curves.obj")).unwrap().len(), 12, "{name}");
+        let eval = Command::new(env!("CARGO_BIN_EXE_crease"))
+            .args(["eval", "--json", "--truth", d.path().join("run_plain/curves.obj").to_str().unwrap(), "--curves", run.join("curves.obj").to_str().unwrap()])
+            .output()
+            .unwrap();
+        let s: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
+        for k in ["recall", "precision"] {
+            assert!(s[k].as_f64().unwrap() > 0.99, "{name}: {k} {} against the cube's own curves", s[k]);
+        }
+    }
+}
