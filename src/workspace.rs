@@ -17,8 +17,12 @@ pub struct Workspace {
     memory: Option<Mutex<HashMap<String, Arc<Vec<u8>>>>>,
     /// The run directory's lock file, locked, once [`Workspace::lock`] took it.
     lock: Option<std::fs::File>,
-    /// A worker's own lock file (`lock.<i>`), locked, once [`Workspace::lock`] took it.
-    worker_lock: Option<std::fs::File>,
+    /// A worker's own lock file (`lock.<i>`), locked, once [`Workspace::lock`] took it, and its
+    /// name.
+    worker_lock: Option<(std::fs::File, String)>,
+    /// True if [`Workspace::disk`] made the run directory: it is removed again if nothing but
+    /// the lock was ever written to it (a run refused at its start).
+    created: bool,
     /// Where the working files live when not in the run directory (see
     /// [`Workspace::set_work_dir`]): that directory, and the top-level names that go there.
     work: Option<(PathBuf, &'static [&'static str])>,
@@ -27,16 +31,40 @@ pub struct Workspace {
 /// The lock file of a run directory.
 pub const LOCK: &str = "lock";
 
+impl Drop for Workspace {
+    fn drop(&mut self) {
+        self.release();
+    }
+}
+
+/// True if `f` is the file at `path` (not one removed from it since it was opened).
+fn same_file(f: &std::fs::File, path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (f.metadata(), std::fs::metadata(path)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (f, path);
+        true
+    }
+}
+
 impl Workspace {
     /// The run directory `dir` (created if needed).
     pub fn disk(dir: &Path) -> Result<Workspace> {
+        let created = !dir.exists();
         std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
-        Ok(Workspace { root: dir.to_path_buf(), memory: None, lock: None, worker_lock: None, work: None })
+        Ok(Workspace { root: dir.to_path_buf(), memory: None, lock: None, worker_lock: None, work: None, created })
     }
 
     /// A workspace that keeps its files in memory.
     pub fn memory() -> Workspace {
-        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())), lock: None, worker_lock: None, work: None }
+        Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())), lock: None, worker_lock: None, work: None, created: false }
     }
 
     /// Takes the run directory for this process until the workspace is dropped: an advisory
@@ -64,27 +92,40 @@ impl Workspace {
             let who = pid.map_or("crease workers".to_string(), |pid| format!("process {pid}"));
             Error::Usage(format!("{}: in use by {what} ({who}); wait for it to end, or stop it, before running here", self.root.display()))
         };
-        let mut f = open(LOCK)?;
-        let taken = match worker {
-            None => f.try_lock(),
-            Some(_) => f.try_lock_shared(),
+        // (The lock file is removed when a run ends, by the process that holds it alone; one
+        // taken by another process in between is the removed file, not the one at the path:
+        // then it is opened again.)
+        let f = loop {
+            let mut f = open(LOCK)?;
+            let taken = match worker {
+                None => f.try_lock(),
+                Some(_) => f.try_lock_shared(),
+            };
+            match taken {
+                Ok(()) => {}
+                Err(std::fs::TryLockError::WouldBlock) => return Err(refused(&mut f, "another crease run")),
+                Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(self.path(LOCK), e)),
+            }
+            if same_file(&f, &self.path(LOCK)) {
+                break f;
+            }
         };
-        match taken {
-            Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => return Err(refused(&mut f, "another crease run")),
-            Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(self.path(LOCK), e)),
-        }
         let mut own = match worker {
             None => f.try_clone().map_err(|e| Error::output(self.path(LOCK), e))?,
             Some(i) => {
                 let name = format!("{LOCK}.{i}");
-                let mut w = open(&name)?;
-                match w.try_lock() {
-                    Ok(()) => {}
-                    Err(std::fs::TryLockError::WouldBlock) => return Err(refused(&mut w, &format!("worker {i}"))),
-                    Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(self.path(&name), e)),
-                }
-                self.worker_lock = Some(w.try_clone().map_err(|e| Error::output(self.path(&name), e))?);
+                let w = loop {
+                    let mut w = open(&name)?;
+                    match w.try_lock() {
+                        Ok(()) => {}
+                        Err(std::fs::TryLockError::WouldBlock) => return Err(refused(&mut w, &format!("worker {i}"))),
+                        Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(self.path(&name), e)),
+                    }
+                    if same_file(&w, &self.path(&name)) {
+                        break w;
+                    }
+                };
+                self.worker_lock = Some((w.try_clone().map_err(|e| Error::output(self.path(&name), e))?, name));
                 w
             }
         };
@@ -92,6 +133,26 @@ impl Workspace {
         r.map_err(|e| Error::output(self.path(LOCK), e))?;
         self.lock = Some(f);
         Ok(())
+    }
+
+    /// Lets the run directory go: the lock files are removed (the run's own, `lock`, only by
+    /// the last process holding it), and the directory itself if this workspace made it and
+    /// nothing else was written to it.
+    fn release(&mut self) {
+        if let Some((w, name)) = self.worker_lock.take() {
+            let _ = std::fs::remove_file(self.path(&name));
+            drop(w);
+        }
+        if let Some(f) = self.lock.take() {
+            // (A worker holds the lock shared: it is the last one if it can take it alone.)
+            if f.try_lock().is_ok() {
+                let _ = std::fs::remove_file(self.path(LOCK));
+            }
+            drop(f);
+            if self.created {
+                let _ = std::fs::remove_dir(&self.root);
+            }
+        }
     }
 
     /// The root directory.

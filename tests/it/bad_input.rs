@@ -512,3 +512,33 @@ fn options_out_of_range_are_refused_by_the_library_as_by_the_command_line() {
     assert_eq!(code, exit::USAGE, "{err}");
     assert!(err.contains("--threads 10000: at most"), "{err}");
 }
+
+/// A run refused at its start leaves no run directory behind (it once left one holding only
+/// `lock`), and a finished run, lone or by workers, keeps no lock file.
+#[test]
+fn no_lock_file_outlives_its_run() {
+    let d = tmp();
+    let out = d.path().join("refused");
+    let cube = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las")).unwrap();
+    let truncated = d.path().join("truncated.las");
+    std::fs::write(&truncated, &cube[..3000]).unwrap();
+    let (code, _, err) = crease(&["extract", truncated.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
+    assert_eq!(code, exit::DATA, "{err}");
+    assert!(!out.exists(), "a refused run left {:?}", std::fs::read_dir(&out).map(|r| r.map(|e| e.unwrap().file_name()).collect::<Vec<_>>()));
+    let las = d.path().join("cube.las");
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las"), &las).unwrap();
+    let locks = |dir: &Path| std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).filter(|n| n.starts_with("lock")).collect::<Vec<_>>();
+    let lone = d.path().join("lone");
+    let (code, _, err) = crease(&["extract", las.to_str().unwrap(), "-o", lone.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(locks(&lone), Vec::<String>::new());
+    let shared = d.path().join("shared");
+    for _ in 0..3 {
+        for w in ["1/2", "0/2"] {
+            let (code, _, err) = crease(&["extract", las.to_str().unwrap(), "-o", shared.to_str().unwrap(), "-q", "--worker", w]);
+            assert_eq!(code, 0, "{err}");
+        }
+    }
+    assert!(shared.join("curves.obj").exists());
+    assert_eq!(locks(&shared), Vec::<String>::new());
+}
