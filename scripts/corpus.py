@@ -67,7 +67,9 @@ def main():
     ap.add_argument("--levels", default="0 k1 k2 k4 0.005 0.01 0.02")
     ap.add_argument("--bin", default=None)
     ap.add_argument("--seed", default="1", help="the extraction's --seed")
-    ap.add_argument("--json", default=None, help="also write every part's row here")
+    ap.add_argument("--json", default=None,
+                    help="also write every part's row here, a JSON object a line, as each is scored; "
+                         "rows already there are kept and not run again (an interrupted table resumes)")
     ap.add_argument("--only", default=None, help="only parts whose name contains this")
     args, extra = ap.parse_known_args()
     extra = [a for a in extra if a != "--"]
@@ -88,10 +90,18 @@ def main():
     if not parts:
         sys.exit(f"corpus.py: no NAME.off with NAME.truth.obj in {args.corpus}")
     rows = []
+    done = {}
+    if args.json and Path(args.json).exists():
+        for line in Path(args.json).read_text().splitlines():
+            r = json.loads(line)
+            done[(r["part"], r["level"])] = r
     levels = args.levels.split()
     for level in levels:
         for off in parts:
             name = f"{off.parent.name}_{off.stem}"
+            if (name, level) in done:
+                rows.append(done[(name, level)])
+                continue
             cloud = work / f"{name}_{level}_{args.points}.las"
             if not cloud.exists():
                 part = cloud.with_suffix(f".part{os.getpid()}.las")
@@ -118,17 +128,21 @@ def main():
                 [str(binary), "eval", "--truth", str(truth), "--curves", str(out / "curves.obj"), "--diag", str(diag),
                  "--resolvable", str(max(3 * radius, 1e-9)), "--json"], check=True, capture_output=True).stdout)
             res = ev.get("resolvable") or {}
-            # (No curve at all has no precision; it counts as 0, a miss, not as a part left out.)
-            row = dict(part=name, level=level, recall=ev["recall"], resolvable=res.get("recall", ev["recall"]),
+            # (No curve at all has no precision; it counts as 0, a miss, not as a part left out. A
+            # part whose truth is all closer than the resolvable separation has no resolvable
+            # recall: its recall stands for it.)
+            row = dict(part=name, level=level, recall=ev["recall"],
+                       resolvable=res["recall"] if res.get("recall") is not None else ev["recall"],
                        share=res.get("share"), precision=ev["precision"] if ev["precision"] is not None else 0.0, curves=ev["curves"],
                        truth_curves=ev["truth_curves"], seconds=seconds,
                        edge_points=report.get("counts", {}).get("edge_points"))
             rows.append(row)
+            if args.json:
+                with open(args.json, "a") as f:
+                    f.write(json.dumps(row) + "\n")
             print(f"  {name} {level}: recall {row['recall']:.3f} resolvable {row['resolvable']:.3f} "
                   f"precision {row['precision']:.3f} {seconds:.2f} s", file=sys.stderr, flush=True)
             shutil.rmtree(out, ignore_errors=True)
-    if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=1))
     print(f"{len(parts)} parts, {args.points} points, `crease extract {' '.join(extra)}`; median / 10th percentile")
     print()
     print("| noise | recall | resolvable recall | precision | seconds (median / max) |")
