@@ -3,7 +3,7 @@
 use clap::{Args, CommandFactory, Parser, Subcommand, ValueEnum};
 use crease::synth::{self, Sampling, SynthOptions};
 use crease::Error;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -204,8 +204,16 @@ enum Cmd {
         /// The shell.
         shell: clap_complete::Shell,
     },
-    /// Prints the man page (roff) to stdout (e.g. `crease man > crease.1; man ./crease.1`).
-    Man,
+    /// Prints a man page (roff) to stdout: crease(1), or with a subcommand its own page,
+    /// crease-SUBCOMMAND(1) (e.g. `crease man extract > crease-extract.1; man ./crease-extract.1`);
+    /// with --dir DIR, writes every page into DIR.
+    Man {
+        /// The subcommand whose page to print (default: the top page).
+        subcommand: Option<String>,
+        /// Write crease.1 and every crease-SUBCOMMAND.1 into this directory instead.
+        #[arg(long, value_name = "DIR", conflicts_with = "subcommand")]
+        dir: Option<PathBuf>,
+    },
     /// Generates test clouds with ground-truth curves (OUT and OUT.truth.obj).
     Synth {
         #[command(subcommand)]
@@ -399,7 +407,7 @@ fn run(cli: Cli) -> Result<(), Error> {
             let cleaned = crease::run::status(&dir).is_ok_and(|s| s.cleaned);
             eprintln!("wrote {}{}", page.display(), if cleaned { " (the curves alone: the run's points were removed with --clean)" } else { "" });
         }
-        Cmd::Man => clap_mangen::Man::new(Cli::command()).render(&mut std::io::stdout()).map_err(|e| Error::output("stdout", e))?,
+        Cmd::Man { subcommand, dir } => man_cmd(subcommand.as_deref(), dir.as_deref())?,
         Cmd::Extract(args) => extract_cmd(args)?,
         Cmd::Slurm(args) => slurm_cmd(args)?,
         Cmd::Status { dir, json } => {
@@ -412,6 +420,36 @@ fn run(cli: Cli) -> Result<(), Error> {
         }
     }
     Ok(())
+}
+
+/// `crease man`: the top page, one subcommand's page (named crease-SUBCOMMAND, as the top
+/// page's SEE ALSO names it), or all of them written into a directory.
+fn man_cmd(subcommand: Option<&str>, dir: Option<&Path>) -> Result<(), Error> {
+    let top = Cli::command();
+    let page = |cmd: clap::Command, name: String| clap_mangen::Man::new(cmd.name(name.clone()).bin_name(name.replace('-', " ")));
+    if let Some(dir) = dir {
+        std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+        let mut pages = vec![("crease".to_string(), top.clone())];
+        pages.extend(top.get_subcommands().filter(|c| c.get_name() != "help").map(|c| (format!("crease-{}", c.get_name()), c.clone())));
+        for (name, cmd) in pages {
+            let path = dir.join(format!("{name}.1"));
+            let mut out = Vec::new();
+            page(cmd, name).render(&mut out).map_err(|e| Error::output(&path, e))?;
+            std::fs::write(&path, out).map_err(|e| Error::output(&path, e))?;
+        }
+        return Ok(());
+    }
+    let man = match subcommand {
+        None => clap_mangen::Man::new(top),
+        Some(name) => {
+            let Some(cmd) = top.find_subcommand(name).filter(|c| c.get_name() != "help") else {
+                let names: Vec<&str> = top.get_subcommands().map(|c| c.get_name()).filter(|&n| n != "help").collect();
+                return Err(Error::Usage(format!("crease man: no subcommand '{name}' (one of {})", names.join(", "))));
+            };
+            page(cmd.clone(), format!("crease-{}", cmd.get_name()))
+        }
+    };
+    man.render(&mut std::io::stdout()).map_err(|e| Error::output("stdout", e))
 }
 
 /// Most worker threads a core may be given: more only adds switching and memory.

@@ -23,6 +23,18 @@ fn completions_and_man_page_cover_the_commands() {
     for word in ["extract", "status", "eval", "synth"] {
         assert!(man.contains(word), "man page lacks {word}");
     }
+    // Every page the top page refers to exists: one per subcommand, with its own options.
+    let extract = stdout(&["man", "extract"]);
+    assert!(extract.contains(".TH crease-extract 1") && extract.contains("min\\-confidence"), "{}", &extract[..300.min(extract.len())]);
+    let d = tempfile::tempdir().unwrap();
+    stdout(&["man", "--dir", d.path().to_str().unwrap()]);
+    for page in ["crease", "crease-extract", "crease-status", "crease-synth", "crease-eval", "crease-man"] {
+        // (roff escapes the dash.)
+        assert!(man.contains(&format!("{}(1)", page.replace('-', "\\-"))) || page == "crease", "the top page does not refer to {page}");
+        assert!(d.path().join(format!("{page}.1")).exists(), "no {page}.1");
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(["man", "nope"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(crease::error::exit::USAGE));
 }
 
 /// `crease view RUN` writes a page that needs nothing but itself (no network, no other file)
