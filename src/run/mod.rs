@@ -164,9 +164,9 @@ impl Default for RunOptions {
     }
 }
 
-/// The smallest memory budget a run takes: a tile, its tree and the curve stage's blocks need
-/// some room whatever the input.
-pub const MIN_MEMORY: u64 = 64 << 20;
+/// The smallest memory budget a run takes: room for a tile of a few thousand points and a
+/// batch of curves (the tests' smallest fixtures run in 0.6 MB, batched).
+pub const MIN_MEMORY: u64 = 512 << 10;
 
 impl RunOptions {
     /// Checks the options, with the message the command line shows for each: a memory budget
@@ -182,7 +182,7 @@ impl RunOptions {
     pub fn validate(&self) -> Result<()> {
         let refuse = |m: String| Err(Error::Usage(m));
         if self.memory < MIN_MEMORY {
-            return refuse(format!("--memory must be at least {} MiB", MIN_MEMORY >> 20));
+            return refuse(format!("--memory must be at least {} KiB", MIN_MEMORY >> 10));
         }
         if let Some(t) = self.tile_size
             && !(t > 0.0 && t.is_finite())
