@@ -78,6 +78,14 @@ pub fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<
     let q = cloud.at(i);
     let mut d2: Vec<f64> = buf.iter().map(|b| cloud.at(b.0 as usize).distance_squared(q)).collect();
     let rk = d2.select_nth_unstable_by(K, f64::total_cmp).1.sqrt();
+    // The K nearest neighbours (and the point) seed the surface that the noise is measured about.
+    // (Points tied with the K-th, common on quantised coordinates, all belong: compared with a
+    // margin far above the rounding of the tile's local coordinates, so that each tile takes
+    // the same. In global id order, so that the seed plane's sums are the same in any tile.)
+    let within = rk * rk * (1.0 + 1e-9);
+    let mut near: Vec<(u64, DVec3)> = buf.iter().map(|b| (cloud.gid[b.0 as usize], cloud.at(b.0 as usize))).filter(|p| p.1.distance_squared(q) <= within).collect();
+    near.sort_unstable_by_key(|p| p.0);
+    let seed: Vec<DVec3> = near.into_iter().map(|p| p.1).collect();
     let kappa = rk * (2f64.ln() / K as f64).sqrt();
     // Points per unit area around this point, from the count in the 16-kappa ball.
     let density = cloud.count_within(q, 16.0 * kappa, buf) as f64 / (std::f64::consts::PI * (16.0 * kappa).powi(2));
@@ -97,7 +105,7 @@ pub fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<
             break;
         }
         // (A wider ball that cannot be fitted leaves the narrower one's noise.)
-        let Some((rms, foot)) = noise_within(cloud, buf, q) else {
+        let Some((rms, foot)) = noise_within(cloud, buf, &seed, q) else {
             if round == 0 {
                 return None;
             }
@@ -112,26 +120,44 @@ pub fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<
     Some((PointStats { spacing: kappa, noise, density }, reach))
 }
 
-/// The RMS residual of the points `buf` about a quadric (fitted, the points beyond three
-/// robust deviations (outliers) dropped, fitted again), and the foot of `q` on it.
-fn noise_within(cloud: &Cloud, buf: &[(u32, f32)], q: DVec3) -> Option<(f64, DVec3)> {
-    let mut pts: Vec<DVec3> = buf.iter().map(|&(j, _)| cloud.at(j as usize)).collect();
-    for round in 0..2 {
-        let pca = Pca::of(pts.iter().map(|&p| (p, 1.0)))?;
-        let quad = fit::Quadric::fit(fit::Frame::new(pca.mean, pca.normal()), pts.iter().map(|&p| (p, 1.0)), 1e-6)?;
-        let mut res: Vec<f64> = pts.iter().map(|&p| quad.value(p).abs()).collect();
-        if round == 1 {
-            let rms = (res.iter().map(|r| r * r).sum::<f64>() / res.len() as f64).sqrt();
-            return Some((rms, q - quad.value(q) * quad.frame.n));
-        }
-        let limit = 3.0 * 1.4826 * median(&mut res);
-        pts.retain(|&p| quad.value(p).abs() <= limit);
-        if pts.len() < 10 {
+/// The RMS residual of the points `buf` about the surface that `q` lies on, and the foot of
+/// `q` on it. A second surface in the ball (a thin plate's far face, the wall beside a floor)
+/// is not noise, and a quadric fitted through both measures their distance instead; so the fit
+/// starts from the better of two planes by least quantile of squares, that of the whole ball
+/// and that of `seed`, the points nearest to `q` (on `q`'s own surface wherever the other is
+/// farther than they reach, about five spacings), and is then fitted as a quadric to the points
+/// within three robust deviations of it until they no longer change.
+fn noise_within(cloud: &Cloud, buf: &[(u32, f32)], seed: &[DVec3], q: DVec3) -> Option<(f64, DVec3)> {
+    let pts: Vec<DVec3> = buf.iter().map(|&(j, _)| cloud.at(j as usize)).collect();
+    let lower_quartile = |quad: &fit::Quadric| {
+        let mut r: Vec<f64> = pts.iter().map(|&p| quad.value(p).abs()).collect();
+        quantile(&mut r, 0.25)
+    };
+    let plane = |set: &[DVec3]| Pca::of(set.iter().map(|&p| (p, 1.0))).map(|c| fit::Quadric::plane(fit::Frame::new(c.mean, c.normal())));
+    let (mut quad, quartile) = [plane(&pts), plane(seed)].into_iter().flatten().map(|s| (s, lower_quartile(&s))).min_by(|a, b| a.1.total_cmp(&b.1))?;
+    // (The lower quartile of |x| for a normal deviate x is 0.3186 of its deviation.)
+    let mut limit = 3.0 * quartile / 0.3186;
+    let mut members: Vec<DVec3> = Vec::new();
+    for _ in 0..NOISE_FIT_ROUNDS {
+        let next: Vec<DVec3> = pts.iter().copied().filter(|&p| quad.value(p).abs() <= limit).collect();
+        if next.len() < 10 {
             return Some((0.0, q));
         }
+        if next == members {
+            break;
+        }
+        members = next;
+        let pca = Pca::of(members.iter().map(|&p| (p, 1.0)))?;
+        quad = fit::Quadric::fit(fit::Frame::new(pca.mean, pca.normal()), members.iter().map(|&p| (p, 1.0)), 1e-6)?;
+        let mut own: Vec<f64> = members.iter().map(|&p| quad.value(p).abs()).collect();
+        limit = 3.0 * 1.4826 * median(&mut own);
     }
-    None
+    let rms = (members.iter().map(|&p| quad.value(p).powi(2)).sum::<f64>() / members.len() as f64).sqrt();
+    Some((rms, q - quad.value(q) * quad.frame.n))
 }
+
+/// Most rounds of a noise fit's re-selection of its surface's points (see [`noise_within`]).
+const NOISE_FIT_ROUNDS: usize = 5;
 
 pub(crate) fn median(v: &mut [f64]) -> f64 {
     quantile(v, 0.5)
@@ -352,6 +378,29 @@ mod tests {
         assert!((dense - sparse).abs() < 0.1 * sparse, "dense {dense}, sparse {sparse}");
         // The dense cloud's ball was widened to the noise's, and the reach says so.
         assert!(dense_reach >= 0.9 * NOISE_BALL * deviation, "read {dense_reach}");
+    }
+
+    /// A thin plate's two faces within one noise ball: the noise measured is the faces' own,
+    /// not half the plate's thickness (which, read as noise, widened every neighbourhood of a
+    /// clean 1 mm plate until no edge was found).
+    #[test]
+    fn a_second_surface_in_the_ball_is_not_noise() {
+        // (A unit square's two faces 0.02 apart, about 8 spacings at 20 k points a face.)
+        let (thickness, n) = (0.02, 20_000);
+        for radius in [0.0, 0.002] {
+            let mut rng = crate::rng::Rng::stream(5, n as u64);
+            let pts: Vec<DVec3> = (0..2 * n)
+                .map(|k| DVec3::new(rng.f64(), rng.f64(), if k % 2 == 0 { 0.0 } else { thickness }) + rng.in_ball(radius))
+                .collect();
+            let cloud = Cloud::new(&pts);
+            let thinned = Thinned::new(&cloud);
+            let mut buf = Vec::new();
+            let middle: Vec<usize> = (0..cloud.len()).filter(|&i| ((cloud.at(i) + cloud.origin).truncate() - glam::DVec2::splat(0.5)).length() < 0.1).take(60).collect();
+            let mut noise: Vec<f64> = middle.iter().filter_map(|&i| point_stats(&cloud, || &thinned, i, &mut buf)).map(|(s, _)| s.noise).collect();
+            let measured = median(&mut noise);
+            let deviation = radius / 5f64.sqrt();
+            assert!(measured <= 1.1 * deviation + 1e-9 && measured >= 0.85 * deviation, "noise radius {radius}: measured {measured} against a deviation of {deviation}");
+        }
     }
 
     #[test]
