@@ -254,6 +254,26 @@ pub struct Report {
     pub outside: Outside,
     /// Curves written, by shape.
     pub shapes: ShapeCounts,
+    /// What stage 2 cost per point it worked on: its seconds per candidate and per edge point
+    /// found, in microseconds (the projection model's cost, whatever the cloud's size).
+    pub projection_cost: ProjectionCost,
+}
+
+/// Stage 2's seconds ([`Timings::projection`]) per candidate and per edge point, in
+/// microseconds (0 where there were none).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct ProjectionCost {
+    /// Microseconds per candidate projected.
+    pub per_candidate_us: f64,
+    /// Microseconds per edge point found.
+    pub per_edge_point_us: f64,
+}
+
+impl ProjectionCost {
+    fn of(seconds: &Timings, counts: &Counts) -> ProjectionCost {
+        let per = |n: u64| if n > 0 { 1e6 * seconds.projection / n as f64 } else { 0.0 };
+        ProjectionCost { per_candidate_us: per(counts.candidates), per_edge_point_us: per(counts.edge_points) }
+    }
 }
 
 /// Curves written, by [`Shape`].
@@ -1056,6 +1076,7 @@ impl<'a> Run<'a> {
             tau,
             min_confidence: self.opts.min_confidence,
             min_length: self.opts.min_length,
+            projection_cost: ProjectionCost::of(&seconds, &counts),
             counts,
             seconds,
             pass_seconds: self.pass.clone(),
