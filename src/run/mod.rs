@@ -396,7 +396,13 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
     let in_work_dir = |c: &Path| c.ancestors().skip(1).any(|a| a.join(WORK_OWNER).is_file());
     let in_run_dir = |f: &Path| f.canonicalize().is_ok_and(|c| run_dir.as_deref().is_some_and(|r| is_run_file(r, &c)) || in_work_dir(&c));
     let expanded = io::expand_inputs(inputs, opts.recursive)?;
+    // (Another run's directory holds its curves and tile store, not a scan.)
+    let other_runs = other_run_directories(&expanded.files, run_dir.as_deref());
+    let in_run_dir = |f: &Path| in_run_dir(f) || f.canonicalize().is_ok_and(|c| other_runs.iter().any(|d| c.starts_with(d)));
     let mut warnings = Warnings::new(opts.warn);
+    for d in &other_runs {
+        warnings.push(format!("{}: passed over: a crease run directory (its curves and working files are not a scan)", d.display()));
+    }
     warnings.extend(expanded.warnings(in_run_dir));
     let in_run_dir = |f: &PathBuf| in_run_dir(f);
     let files: Vec<PathBuf> = expanded.files.into_iter().filter(|f| !in_run_dir(f)).collect();
@@ -1143,6 +1149,30 @@ pub fn write_view(dir: &Path) -> Result<PathBuf> {
     let page = dir.join(VIEW);
     crate::view::write_html(&page, &title, &points, &curves, &crs)?;
     Ok(page)
+}
+
+/// The crease run directories (canonical) that hold some of `files`, other than `this_run`: a
+/// directory whose manifest is a run's (a job and a tile grid).
+fn other_run_directories(files: &[PathBuf], this_run: Option<&Path>) -> Vec<PathBuf> {
+    let mut seen: std::collections::HashMap<PathBuf, bool> = std::collections::HashMap::new();
+    let mut runs = vec![];
+    for f in files {
+        let Ok(c) = f.canonicalize() else { continue };
+        for a in c.ancestors().skip(1) {
+            if Some(a) == this_run {
+                continue;
+            }
+            let is_run = *seen.entry(a.to_path_buf()).or_insert_with(|| {
+                let m = a.join(manifest::NAME);
+                m.is_file()
+                    && std::fs::read(&m).ok().and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok()).is_some_and(|v| v.get("job").is_some() && v.get("grid").is_some())
+            });
+            if is_run && !runs.iter().any(|r: &PathBuf| r == a) {
+                runs.push(a.to_path_buf());
+            }
+        }
+    }
+    runs
 }
 
 /// True if `f` (canonical) is a file or directory a run in `dir` (canonical) writes.

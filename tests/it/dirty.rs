@@ -45,3 +45,20 @@ fn copies_of_points_change_nothing() {
         }
     }
 }
+
+/// A finished run inside an input directory tree (its curves.ply, its tile store's files) is
+/// passed over with a warning naming it, not read as a scan: the curves are the scan's alone.
+#[test]
+fn a_run_directory_among_the_inputs_is_not_a_scan() {
+    let d = tempfile::tempdir().unwrap();
+    let scans = d.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las"), scans.join("cube.las")).unwrap();
+    let alone = extract(&scans.join("cube.las"), &scans.join("old_run"));
+    let run = Command::new(env!("CARGO_BIN_EXE_crease")).args(["extract", "-r", scans.to_str().unwrap(), "-o", d.path().join("again").to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("old_run: passed over: a crease run directory"), "{err}");
+    assert!(!err.contains("old_run/"), "the run's own files listed one by one: {err}");
+    assert!(std::fs::read(d.path().join("again/curves.obj")).unwrap() == alone, "other curves than the scan's");
+}
