@@ -699,6 +699,15 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
                     }
                     continue;
                 }
+                crease::run::WorkerStep::AlreadyFinished => {
+                    if !quiet {
+                        eprintln!("worker {}/{}: the run is finished; its outputs are in {}", w.index, w.count, dir.display());
+                    }
+                    if json {
+                        summaries.push(serde_json::json!({"dir": dir, "worker": format!("{}/{}", w.index, w.count), "finished": true}));
+                    }
+                    continue;
+                }
             },
         };
         if json {

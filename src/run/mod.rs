@@ -138,6 +138,8 @@ pub enum WorkerStep {
     /// This worker's share is done as far as it can go; what it waits for, for example
     /// "residuals: 5 of 8 tiles done (the other workers' share)".
     Waiting(String),
+    /// The run had already finished (its outputs written by worker 0): nothing is left to do.
+    AlreadyFinished,
 }
 
 impl Default for RunOptions {
@@ -359,6 +361,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
         WorkerStep::Finished(report) => Ok(*report),
         // (A lone run does every tile itself: it has nothing to wait for.)
         WorkerStep::Waiting(what) => Err(Error::Usage(format!("{}: {what}", dir.display()))),
+        WorkerStep::AlreadyFinished => Err(Error::Usage(format!("{}: finished by workers; a lone run would start it over", dir.display()))),
     }
 }
 
@@ -378,6 +381,7 @@ pub fn run_extract(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Fil
 /// match run_worker(&inputs, dir, &Default::default(), &Default::default(), &RunOptions::default(), me)? {
 ///     WorkerStep::Finished(report) => println!("{} curves", report.counts.curves),
 ///     WorkerStep::Waiting(what) => println!("waiting for {what}"),
+///     WorkerStep::AlreadyFinished => println!("finished"),
 /// }
 /// # Ok::<(), crease::Error>(())
 /// ```
@@ -480,6 +484,11 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         Ok((b, declared))
     };
     let (manifest, resumed) = plan(&mut ws, job, bounds, opts)?;
+    // (Worker 0 writes the outputs, again if an output setting changed; the others had nothing
+    // left to do once it finished, and were told to wait for ever.)
+    if manifest.finished && !Worker::leads(worker) {
+        return Ok(WorkerStep::AlreadyFinished);
+    }
     let mut run = Run::new(ws, manifest, opts, worker);
     let Some(r) = run.tile_passes(&Input::Files(&files, filter), params, &first)? else {
         return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));

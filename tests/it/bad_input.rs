@@ -541,4 +541,9 @@ fn no_lock_file_outlives_its_run() {
     }
     assert!(shared.join("curves.obj").exists());
     assert_eq!(locks(&shared), Vec::<String>::new());
+    // A worker of the finished run says so and exits 0 (it once said "waiting ... run it
+    // again" for ever).
+    let (code, _, err) = crease(&["extract", las.to_str().unwrap(), "-o", shared.to_str().unwrap(), "--worker", "1/2"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("worker 1/2: the run is finished"), "{err}");
 }
