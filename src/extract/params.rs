@@ -207,7 +207,7 @@ impl Params {
             return refuse("--max-turn must be an angle above 0 and at most 180 degrees");
         }
         if let Some(a) = self.min_angle_deg
-            && !(a >= 0.0 && a < 180.0)
+            && !(0.0..180.0).contains(&a)
         {
             return refuse("--min-angle must be an angle from 0 to below 180 degrees");
         }
