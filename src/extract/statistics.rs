@@ -105,7 +105,7 @@ pub fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<
             break;
         }
         // (A wider ball that cannot be fitted leaves the narrower one's noise.)
-        let Some((rms, foot)) = noise_within(cloud, buf, &seed, q) else {
+        let Some((rms, foot)) = noise_within(cloud, buf, &seed, q, kappa) else {
             if round == 0 {
                 return None;
             }
@@ -127,7 +127,7 @@ pub fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<
 /// and that of `seed`, the points nearest to `q` (on `q`'s own surface wherever the other is
 /// farther than they reach, about five spacings), and is then fitted as a quadric to the points
 /// within three robust deviations of it until they no longer change.
-fn noise_within(cloud: &Cloud, buf: &[(u32, f32)], seed: &[DVec3], q: DVec3) -> Option<(f64, DVec3)> {
+fn noise_within(cloud: &Cloud, buf: &[(u32, f32)], seed: &[DVec3], q: DVec3, kappa: f64) -> Option<(f64, DVec3)> {
     let pts: Vec<DVec3> = buf.iter().map(|&(j, _)| cloud.at(j as usize)).collect();
     let lower_quartile = |quad: &fit::Quadric| {
         let mut r: Vec<f64> = pts.iter().map(|&p| quad.value(p).abs()).collect();
@@ -151,10 +151,18 @@ fn noise_within(cloud: &Cloud, buf: &[(u32, f32)], seed: &[DVec3], q: DVec3) -> 
         quad = fit::Quadric::fit(fit::Frame::new(pca.mean, pca.normal()), members.iter().map(|&p| (p, 1.0)), 1e-6)?;
         let mut own: Vec<f64> = members.iter().map(|&p| quad.value(p).abs()).collect();
         limit = 3.0 * 1.4826 * median(&mut own);
+        // (A surface fitted to rounding, as a clean cloud's are, has no noise to narrow in on.)
+        if limit < kappa * CLEAN {
+            break;
+        }
     }
     let rms = (members.iter().map(|&p| quad.value(p).powi(2)).sum::<f64>() / members.len() as f64).sqrt();
     Some((rms, q - quad.value(q) * quad.frame.n))
 }
+
+/// Residuals below this share of the spacing are rounding, not noise (as
+/// [`super::params::resolve`] takes them).
+const CLEAN: f64 = 1.0 / (1u64 << 26) as f64;
 
 /// Most rounds of a noise fit's re-selection of its surface's points (see [`noise_within`]).
 const NOISE_FIT_ROUNDS: usize = 5;
