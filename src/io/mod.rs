@@ -160,7 +160,8 @@ impl Inputs {
 
 /// Expands the user's paths: files are kept as given, directories are replaced by the
 /// point files (see [`format_of`]) inside them (`recursive`: in their subdirectories too),
-/// sorted by path. Other entries of a directory are passed over, and named in a warning.
+/// sorted by path. Other entries of a directory are passed over, and named in a warning, as are
+/// its text files that hold no line of coordinates.
 pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
     let mut out = Inputs::default();
     for p in paths {
@@ -175,7 +176,7 @@ pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {
                     // (A symbolic link to a directory is not followed: it may lead back up.)
                     if recursive && e.file_type().is_ok_and(|t| t.is_dir()) {
                         dirs.push(f);
-                    } else if f.is_file() && format_of(&f).is_some() {
+                    } else if f.is_file() && format_of(&f).is_some_and(|k| k != FileFormat::Text || text::looks_like_points(&f)) {
                         files.push(f);
                     } else {
                         other.push(f);

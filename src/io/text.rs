@@ -71,6 +71,21 @@ fn from_names(line: &str) -> Option<TextColumns> {
     Some(TextColumns { xyz: [at(&["x"]).unwrap_or(0), at(&["y"]).unwrap_or(1), at(&["z"]).unwrap_or(2)], class: at(&["classification", "class"]), skip: 1 })
 }
 
+/// True if `path` reads as a text cloud: one of its first lines holds at least three numbers.
+/// A directory's `readme.txt` or notes do not, and are passed over rather than read as an
+/// empty cloud or stopping the run on their first word.
+pub(crate) fn looks_like_points(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = Vec::with_capacity(MAX_LINE);
+    let Ok(file) = File::open(path) else { return true };
+    // (Unreadable files are kept, to be refused with the reader's own message.)
+    if file.take(MAX_LINE as u64).read_to_end(&mut head).is_err() {
+        return true;
+    }
+    let text = String::from_utf8_lossy(head.strip_prefix(BOM).unwrap_or(&head)).into_owned();
+    text.lines().filter(|l| !l.trim().is_empty()).take(16).any(|l| tokens(l).filter(|t| t.parse::<f64>().is_ok()).count() >= 3)
+}
+
 /// A chunked reader over one text cloud.
 pub struct TextReader {
     path: PathBuf,

@@ -62,3 +62,25 @@ fn a_run_directory_among_the_inputs_is_not_a_scan() {
     assert!(!err.contains("old_run/"), "the run's own files listed one by one: {err}");
     assert!(std::fs::read(d.path().join("again/curves.obj")).unwrap() == alone, "other curves than the scan's");
 }
+
+/// A directory's notes with a point cloud's extension (`readme.txt`) are passed over with a
+/// warning: one line of prose was read as a header over an empty cloud, two stopped the run on
+/// their first word. A text cloud with a header and a PTS count is still read.
+#[test]
+fn notes_among_the_scans_are_passed_over() {
+    let d = tempfile::tempdir().unwrap();
+    let scans = d.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
+    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let (half, rest) = cube.split_at(10_000);
+    write_ply(&scans.join("a.ply"), half);
+    let pts: String = std::iter::once(format!("{}\n", rest.len())).chain(rest.iter().map(|p| format!("{} {} {}\n", p.x, p.y, p.z))).collect();
+    std::fs::write(scans.join("b.pts"), pts).unwrap();
+    std::fs::write(scans.join("readme.txt"), "Scans of the 2026 survey\nSee the report for the set-up, 3 stations\n").unwrap();
+    std::fs::write(scans.join("todo.txt"), "check the east wall\n").unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_crease")).args(["extract", scans.to_str().unwrap(), "-o", d.path().join("run").to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("passed over 2 entries that are not point files") && err.contains("readme.txt, todo.txt"), "{err}");
+    assert!(err.contains("12 curves from 20000 points"), "{err}");
+}
