@@ -69,7 +69,8 @@ def main():
     ap.add_argument("--seed", default="1", help="the extraction's --seed")
     ap.add_argument("--json", default=None,
                     help="also write every part's row here, a JSON object a line, as each is scored; "
-                         "rows already there are kept and not run again (an interrupted table resumes)")
+                         "rows already there from the same build and arguments are kept and not run "
+                         "again (an interrupted table resumes)")
     ap.add_argument("--only", default=None, help="only parts whose name contains this")
     args, extra = ap.parse_known_args()
     extra = [a for a in extra if a != "--"]
@@ -94,7 +95,10 @@ def main():
     if args.json and Path(args.json).exists():
         for line in Path(args.json).read_text().splitlines():
             r = json.loads(line)
-            done[(r["part"], r["level"])] = r
+            # (Only rows of this build and these arguments: a file shared by two builds is not
+            # read as either's.)
+            if r.get("build", tag) == tag:
+                done[(r["part"], r["level"])] = r
     levels = args.levels.split()
     for level in levels:
         for off in parts:
@@ -131,7 +135,7 @@ def main():
             # (No curve at all has no precision; it counts as 0, a miss, not as a part left out. A
             # part whose truth is all closer than the resolvable separation has no resolvable
             # recall: its recall stands for it.)
-            row = dict(part=name, level=level, recall=ev["recall"],
+            row = dict(build=tag, part=name, level=level, recall=ev["recall"],
                        resolvable=res["recall"] if res.get("recall") is not None else ev["recall"],
                        share=res.get("share"), precision=ev["precision"] if ev["precision"] is not None else 0.0, curves=ev["curves"],
                        truth_curves=ev["truth_curves"], seconds=seconds,
