@@ -83,7 +83,8 @@ pub fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<
     // margin far above the rounding of the tile's local coordinates, so that each tile takes
     // the same. In global id order, so that the seed plane's sums are the same in any tile.)
     let within = rk * rk * (1.0 + 1e-9);
-    let mut near: Vec<(u64, DVec3)> = buf.iter().map(|b| (cloud.gid[b.0 as usize], cloud.at(b.0 as usize))).filter(|p| p.1.distance_squared(q) <= within).collect();
+    let mut near: Vec<(u64, DVec3)> =
+        buf.iter().map(|b| (cloud.gid[b.0 as usize], cloud.at(b.0 as usize))).filter(|p| p.1.distance_squared(q) <= within).collect();
     near.sort_unstable_by_key(|p| p.0);
     let seed: Vec<DVec3> = near.into_iter().map(|p| p.1).collect();
     let kappa = rk * (2f64.ln() / K as f64).sqrt();
@@ -397,17 +398,20 @@ mod tests {
         let (thickness, n) = (0.02, 20_000);
         for radius in [0.0, 0.002] {
             let mut rng = crate::rng::Rng::stream(5, n as u64);
-            let pts: Vec<DVec3> = (0..2 * n)
-                .map(|k| DVec3::new(rng.f64(), rng.f64(), if k % 2 == 0 { 0.0 } else { thickness }) + rng.in_ball(radius))
-                .collect();
+            let pts: Vec<DVec3> =
+                (0..2 * n).map(|k| DVec3::new(rng.f64(), rng.f64(), if k % 2 == 0 { 0.0 } else { thickness }) + rng.in_ball(radius)).collect();
             let cloud = Cloud::new(&pts);
             let thinned = Thinned::new(&cloud);
             let mut buf = Vec::new();
-            let middle: Vec<usize> = (0..cloud.len()).filter(|&i| ((cloud.at(i) + cloud.origin).truncate() - glam::DVec2::splat(0.5)).length() < 0.1).take(60).collect();
+            let middle: Vec<usize> =
+                (0..cloud.len()).filter(|&i| ((cloud.at(i) + cloud.origin).truncate() - glam::DVec2::splat(0.5)).length() < 0.1).take(60).collect();
             let mut noise: Vec<f64> = middle.iter().filter_map(|&i| point_stats(&cloud, || &thinned, i, &mut buf)).map(|(s, _)| s.noise).collect();
             let measured = median(&mut noise);
             let deviation = radius / 5f64.sqrt();
-            assert!(measured <= 1.1 * deviation + 1e-9 && measured >= 0.85 * deviation, "noise radius {radius}: measured {measured} against a deviation of {deviation}");
+            assert!(
+                measured <= 1.1 * deviation + 1e-9 && measured >= 0.85 * deviation,
+                "noise radius {radius}: measured {measured} against a deviation of {deviation}"
+            );
         }
     }
 

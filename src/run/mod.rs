@@ -1174,7 +1174,10 @@ fn other_run_directories(files: &[PathBuf], this_run: Option<&Path>) -> Vec<Path
             let is_run = *seen.entry(a.to_path_buf()).or_insert_with(|| {
                 let m = a.join(manifest::NAME);
                 m.is_file()
-                    && std::fs::read(&m).ok().and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok()).is_some_and(|v| v.get("job").is_some() && v.get("grid").is_some())
+                    && std::fs::read(&m)
+                        .ok()
+                        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+                        .is_some_and(|v| v.get("job").is_some() && v.get("grid").is_some())
             });
             if is_run && !runs.iter().any(|r: &PathBuf| r == a) {
                 runs.push(a.to_path_buf());

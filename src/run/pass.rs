@@ -197,7 +197,9 @@ fn drop_duplicates(tp: &mut TilePoints, own: std::ops::Range<usize>) -> std::ops
         .par_iter()
         .map(|&p| {
             let [x, y, z] = bits(p);
-            let h = x.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ y.rotate_left(21).wrapping_mul(0xC2B2_AE3D_27D4_EB4F) ^ z.rotate_left(42).wrapping_mul(0x1656_67B1_9E37_79F9);
+            let h = x.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                ^ y.rotate_left(21).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+                ^ z.rotate_left(42).wrapping_mul(0x1656_67B1_9E37_79F9);
             h ^ (h >> 29)
         })
         .collect();

@@ -528,7 +528,9 @@ fn no_lock_file_outlives_its_run() {
     assert!(!out.exists(), "a refused run left {:?}", std::fs::read_dir(&out).map(|r| r.map(|e| e.unwrap().file_name()).collect::<Vec<_>>()));
     let las = d.path().join("cube.las");
     std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las"), &las).unwrap();
-    let locks = |dir: &Path| std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).filter(|n| n.starts_with("lock")).collect::<Vec<_>>();
+    let locks = |dir: &Path| {
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).filter(|n| n.starts_with("lock")).collect::<Vec<_>>()
+    };
     let lone = d.path().join("lone");
     let (code, _, err) = crease(&["extract", las.to_str().unwrap(), "-o", lone.to_str().unwrap(), "-q"]);
     assert_eq!(code, 0, "{err}");

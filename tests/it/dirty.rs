@@ -55,7 +55,10 @@ fn a_run_directory_among_the_inputs_is_not_a_scan() {
     std::fs::create_dir(&scans).unwrap();
     std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las"), scans.join("cube.las")).unwrap();
     let alone = extract(&scans.join("cube.las"), &scans.join("old_run"));
-    let run = Command::new(env!("CARGO_BIN_EXE_crease")).args(["extract", "-r", scans.to_str().unwrap(), "-o", d.path().join("again").to_str().unwrap()]).output().unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_crease"))
+        .args(["extract", "-r", scans.to_str().unwrap(), "-o", d.path().join("again").to_str().unwrap()])
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{err}");
     assert!(err.contains("old_run: passed over: a crease run directory"), "{err}");
@@ -78,7 +81,8 @@ fn notes_among_the_scans_are_passed_over() {
     std::fs::write(scans.join("b.pts"), pts).unwrap();
     std::fs::write(scans.join("readme.txt"), "Scans of the 2026 survey\nSee the report for the set-up, 3 stations\n").unwrap();
     std::fs::write(scans.join("todo.txt"), "check the east wall\n").unwrap();
-    let run = Command::new(env!("CARGO_BIN_EXE_crease")).args(["extract", scans.to_str().unwrap(), "-o", d.path().join("run").to_str().unwrap()]).output().unwrap();
+    let run =
+        Command::new(env!("CARGO_BIN_EXE_crease")).args(["extract", scans.to_str().unwrap(), "-o", d.path().join("run").to_str().unwrap()]).output().unwrap();
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{err}");
     assert!(err.contains("passed over 2 entries that are not point files") && err.contains("readme.txt, todo.txt"), "{err}");
