@@ -276,7 +276,7 @@ pub fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
     let spacing = settle(median(&mut k));
     // (On a noise-free cloud the fits leave rounding residue, 1e-31 or so, that differs with
     // the tiles' origins: below a 2^-26 share of the spacing, noise is zero.)
-    let noise = |x: f64| if x < spacing * 2f64.powi(-26) { 0.0 } else { settle(x) };
+    let noise = |x: f64| if x < spacing * super::statistics::CLEAN { 0.0 } else { settle(x) };
     // (Settled as the spacing is: the share of points kept must be the same in any tiling.)
     let density = settle(median(&mut d));
     let floor = if density > 0.0 { (MIN_NOISY_FIT / (std::f64::consts::PI * density)).sqrt() / FIT_SCALES } else { 0.0 };

@@ -161,9 +161,9 @@ fn noise_within(cloud: &Cloud, buf: &[(u32, f32)], seed: &[DVec3], q: DVec3, kap
     Some((rms, q - quad.value(q) * quad.frame.n))
 }
 
-/// Residuals below this share of the spacing are rounding, not noise (as
-/// [`super::params::resolve`] takes them).
-const CLEAN: f64 = 1.0 / (1u64 << 26) as f64;
+/// Residuals below this share of the spacing are rounding, not noise: a noise fit stops there,
+/// and [`super::params::resolve`] takes such a noise for 0.
+pub(crate) const CLEAN: f64 = 1.0 / (1u64 << 26) as f64;
 
 /// Most rounds of a noise fit's re-selection of its surface's points (see [`noise_within`]).
 const NOISE_FIT_ROUNDS: usize = 5;

@@ -189,7 +189,7 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
 /// Returns where the tile's own points, `own` before, now are.
 fn drop_duplicates(tp: &mut TilePoints, own: std::ops::Range<usize>) -> std::ops::Range<usize> {
     // (0.0 added: -0.0 and 0.0 are the same position.)
-    let bits = |p: DVec3| [(p.x + 0.0).to_bits(), (p.y + 0.0).to_bits(), (p.z + 0.0).to_bits()];
+    let bits = |p: DVec3| crate::keys::bits_key(p + DVec3::ZERO);
     // (Most clouds hold no copy: a sort of one hash a point tells, at a fraction of the cost of
     // sorting the positions. Equal hashes are then checked position by position.)
     let mut hashes: Vec<u64> = tp
