@@ -136,8 +136,11 @@ fn noise_within(cloud: &Cloud, buf: &[(u32, f32)], seed: &[DVec3], q: DVec3, kap
     };
     let plane = |set: &[DVec3]| Pca::of(set.iter().map(|&p| (p, 1.0))).map(|c| fit::Quadric::plane(fit::Frame::new(c.mean, c.normal())));
     let whole = plane(&pts);
-    let (mut quad, quartile) =
-        [whole, plane(seed), whole.and_then(|w| densest_band(&pts, w))].into_iter().flatten().map(|s| (s, lower_quartile(&s))).min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let (mut quad, quartile) = [whole, plane(seed), whole.and_then(|w| densest_band(&pts, w))]
+        .into_iter()
+        .flatten()
+        .map(|s| (s, lower_quartile(&s)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
     // (The lower quartile of |x| for a normal deviate x is 0.3186 of its deviation.)
     let mut limit = 3.0 * quartile / 0.3186;
     let mut members: Vec<DVec3> = Vec::new();
