@@ -1,4 +1,5 @@
-//! `crease eval`: scores extracted curves against ground-truth curves (DESIGN.md section 4).
+//! `crease eval`: scores extracted curves against ground-truth curves, as Daniels et al. 2007
+//! do: recall and precision within a tolerance in dB (the bounding-box diagonal of the truth).
 //!
 //! Both curve sets are resampled at `step * dB` (default 0.001 dB, dB = the truth's bounding-box
 //! diagonal unless given). Every sample carries the length it stands for, so shares are shares

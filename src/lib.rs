@@ -1,7 +1,7 @@
 //! crease: extracts sharp feature curves (creases, edges, corners) from laser scans.
 //!
 //! The crate is a library first; the `crease` binary only parses arguments and calls it.
-//! See `README.md` for use and `../shared/DESIGN.md` for the method and architecture.
+//! See `README.md` for use, [`extract`] for the method and [`run`] for the pipeline.
 //!
 //! Modules, in the order data flows through a run (each imports only modules listed above it,
 //! or the leaves at the end):

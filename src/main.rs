@@ -100,7 +100,7 @@ struct ParamArgs {
     /// Evaluate the candidate test and projection at about N points of each fit's
     /// neighbourhood instead of at every point (the fits still use every point): on noisy
     /// clouds, whose neighbourhoods hold up to 150 points, several times faster, at some
-    /// recall where features are weak or thin (README: "Noise costs time"). A clean cloud's
+    /// recall where features are weak or thin (README: "Troubleshooting and tuning"). A clean cloud's
     /// neighbourhood holds about 25.
     #[arg(long, value_name = "N")]
     evaluate_per_fit: Option<f64>,

@@ -1,4 +1,4 @@
-//! The method, after Daniels et al. 2007/2008 (see DESIGN.md section 2): one module a stage,
+//! The method, after Daniels et al. 2007 and 2008: one module a stage,
 //! each a function of plain data, per tile where the stage is local.
 //!
 //! | stage | module | per tile |
@@ -10,6 +10,25 @@
 //! | 3. smoothing, consensus filter | [`smooth`], [`consensus`] | [`polylines::smooth_and_confirm`] (per growth block, [`blocks`]) |
 //! | 4. growing | [`grow`] | [`polylines::grow_block`], then [`stitch`] |
 //! | 5. completion | [`complete`] | per group of polylines that can act on each other ([`groups`]) |
+//!
+//! In a few lines each:
+//! - **Statistics**: the spacing from the 16th neighbour, and the noise as the RMS of a quadric
+//!   fitted about the point's own surface (the densest band of its ball, so that a thin part's
+//!   far face is not taken for noise), over a ball at least [`statistics::NOISE_BALL`]
+//!   deviations wide, at about 20 000 points sampled by position. Every default length follows
+//!   from them ([`params`]); noisy clouds are thinned so that a fit holds about
+//!   [`params::TARGET_NEIGHBOURS`] points, each point kept averaged over those dropped near it.
+//! - **Candidates**: points whose MLS fit leaves a residual above tau (the mean residual), and
+//!   under noise also where two planes fit the neighbourhood clearly better than a quadric.
+//! - **Projection**: a forward search splits a candidate's ball into surfaces; two or more
+//!   nearby give an edge point on their intersection, kept only where the data reaches the
+//!   edge line and both surfaces fit within a few noise deviations (scatter such as a tree
+//!   crown does not); three give a corner point.
+//! - **Curves**: edge points smoothed by adaptive PCA, kept where their neighbours found the
+//!   same two surfaces, grown into polylines in steps of at most `step` that turn no more than
+//!   `max_turn`, stitched across block borders, then completed: gaps closed, corners re-solved
+//!   from the straight runs of their curves and joined, and each curve's normals and confidence
+//!   taken from the smoothed edge points.
 //!
 //! [`neighbourhood`] holds a tile's points indexed for neighbour queries, [`fit`] the small
 //! fits every stage uses. The pipeline that runs the stages over tiles is [`crate::run`].

@@ -56,7 +56,7 @@ pub struct Resolved {
     /// The fits still see every point kept; the candidates and edge points are fewer, as
     /// dense on the scale of the neighbourhoods as `evaluate_per_fit` says. Under noise, where
     /// a fit's disk holds up to [`TARGET_NEIGHBOURS`] points, this is several times faster, at
-    /// a cost in recall where features are weak or thin (measured in the README).
+    /// a cost in recall where features are weak or thin.
     #[serde(default = "every_point")]
     pub evaluate: f64,
     /// Radius of the ball over which each point kept of a thinned cloud is averaged (0: the

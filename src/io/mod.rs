@@ -1,8 +1,31 @@
 //! Streaming point input: LAS/LAZ (through the `las` crate, uncompressed LAS decoded straight
-//! from a memory map) and PLY (ascii and binary).
+//! from a memory map, COPC read through its octree when a box is asked for), PLY (ascii and
+//! binary), E57 and text clouds.
 //!
 //! Readers hand out points in chunks of bounded size so that memory does not grow with the
 //! file; [`read_header`] answers count, bounds and CRS without touching the points.
+//!
+//! What each format gives:
+//! - LAS/LAZ 1.0-1.4, point formats 0-10. The CRS is read as LAS 1.4 asks: from any VLR or EVLR;
+//!   with the header's WKT bit set the WKT rules over GeoTIFF keys (without it, the keys, unless
+//!   they name no code); the EPSG code of a WKT is its root `AUTHORITY` or `ID`; the horizontal
+//!   and vertical units are those the CRS names. A COPC file (`.copc.laz`) with a box
+//!   (`--bounds`) decompresses only the nodes that meet it; without one it reads as the LAZ 1.4
+//!   file it is.
+//! - E57: every scan's pose applied, all scans of a file as one cloud; spherical scans are
+//!   converted, points without a return left out. No classes (all points are class 0). The CRS
+//!   comes from the file's coordinate metadata when that is a WKT, `EPSG:N` or
+//!   `urn:ogc:def:crs:EPSG::N`. Each scan's pose places its scanner, which tells convex curves
+//!   from concave ones.
+//! - Text clouds (`.xyz`, `.pts`, `.csv`, `.txt`; values separated by spaces, tabs, commas or
+//!   semicolons; CRLF and a UTF-8 BOM read right): a first line naming `x`, `y`, `z` (and
+//!   `class` or `classification`) says where they are, else they are the first three values; a
+//!   PTS block's count line is skipped. `--columns` and `--skip-lines` set the layout instead. A
+//!   line that does not parse, or one longer than 64 KiB, is an error naming it; files of a
+//!   directory with no numeric line among their first ones are passed over with a warning.
+//!
+//! Files without a CRS beside files with one are taken to be in the others' CRS, with a warning;
+//! files that disagree on the CRS are refused.
 
 mod e57;
 mod las;
