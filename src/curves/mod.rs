@@ -1,5 +1,44 @@
 //! Feature curves: the [`Polyline`] type and its readers and writers (OBJ, PLY, GeoJSON,
 //! GeoPackage, DXF).
+//!
+//! What each output holds:
+//! - `curves.obj`: `v` / `l` polylines, one `o curve_N` per curve followed by a `# confidence c`
+//!   comment and a `# length L angle A shape K start S end E corners I,J` comment; corners shared
+//!   by several curves are one vertex. A `# crs ...` line names the CRS.
+//! - `curves.ply`: binary; vertex x, y, z (double), nx, ny, nz (the first surface's normal, which
+//!   Open3D, CloudCompare and trimesh read as the normal), n2x, n2y, n2z (the second's), curve
+//!   id, corner flag, the curve's confidence (float) and shape (uchar: 0 unknown, 1 convex, 2
+//!   concave); edge element. A `comment crs` line names the CRS.
+//! - `curves.geojson`: 3D LineStrings in the input's own coordinates (crease does not
+//!   reproject). Per curve, scalar properties only (Shapefile and FlatGeobuf keep them all):
+//!   `id`, `closed`, `length`, `confidence`, `angle`, `shape`, `start` and `end` (`corner`,
+//!   `free` or `closed`), `corners` (indices of corner vertices, as text). The CRS is named with
+//!   the `crs` member, which GDAL reads: the EPSG URN, or the WKT when the CRS has no code; the
+//!   full WKT is also in `crs_wkt`, the units in `crs_units`. Without a CRS, GDAL assumes WGS 84.
+//! - `curves.gpkg`: an OGC GeoPackage, a `curves` table of LineString Z features with the same
+//!   scalar attributes as the GeoJSON, and the CRS (code and WKT) in its spatial reference table.
+//! - `curves.dxf` (AutoCAD 2000): each curve a 3D polyline on layer `crease_curves`, in curve id
+//!   order, each corner a point on layer `crease_corners`. Each polyline carries the curve's
+//!   attributes as extended data of the application `CREASE`: a name (group code 1000) then its
+//!   value (`id` 1071, `closed` 1070, `length`, `confidence`, `angle` 1040, `shape`, `start`,
+//!   `end`, `corners` 1000); GDAL lists them as `RawCodeValues` with `--config
+//!   DXF_INCLUDE_RAW_CODE_VALUES TRUE`. No CRS (DXF has none).
+//!
+//! A curve's `angle` is the mean dihedral angle of its crease in degrees: the wedge the two
+//! surfaces enclose, 90 at a cube's edge, 135 where a chamfer meets a face, towards 180 as the
+//! crease flattens (a convex and a concave crease of the same opening read the same). Its
+//! `shape` is `convex`, `concave` or `unknown` ([`Outside`]): a vertex reads convex if one of its
+//! normals points towards the scanner (more than 10 degrees off grazing), concave if both point
+//! away from it; a curve takes the reading of more than half of its vertices. Its `confidence`
+//! (0 to 1) is what the edge cloud says for it: the share of its length that has edge points
+//! within half a step, how well their surface normals agree, and a length term that saturates
+//! over a few steps.
+//!
+//! Every vertex carries two normals, each pointing away from the other surface's side of the
+//! crease (so the angle between them is 180 degrees minus the dihedral angle): out of the solid
+//! at a convex crease, into it at a concave one. Along a curve they keep the orientation most of
+//! its edge points have. Corners, and the rare vertex with no edge point near it, take those of
+//! the nearest vertex along the curve that has them; a curve with none at all keeps zeros.
 
 mod dxf;
 mod geojson;
@@ -7,6 +46,7 @@ mod gpkg;
 mod obj;
 mod ply;
 mod shape;
+pub mod typed;
 
 pub use self::dxf::write_dxf;
 pub use geojson::write_geojson;
@@ -32,11 +72,13 @@ pub enum Format {
     Gpkg,
     /// DXF 3D polylines for CAD (`curves.dxf`).
     Dxf,
+    /// The curves as typed pieces, lines, arcs, circles and polyline runs (`curves.json`).
+    Json,
 }
 
 impl Format {
     /// Every format, in the order written.
-    pub const ALL: [Format; 5] = [Format::Obj, Format::Ply, Format::Geojson, Format::Gpkg, Format::Dxf];
+    pub const ALL: [Format; 6] = [Format::Obj, Format::Ply, Format::Geojson, Format::Gpkg, Format::Dxf, Format::Json];
     /// What a run writes unless told otherwise.
     pub const DEFAULT: [Format; 3] = [Format::Obj, Format::Ply, Format::Geojson];
 
@@ -48,17 +90,20 @@ impl Format {
             Format::Geojson => "curves.geojson",
             Format::Gpkg => "curves.gpkg",
             Format::Dxf => "curves.dxf",
+            Format::Json => "curves.json",
         }
     }
 
-    /// Writes `curves` in this format.
-    pub fn write(self, path: &std::path::Path, curves: &(impl Curves + ?Sized), crs: &crate::crs::Crs) -> crate::Result<()> {
+    /// Writes `curves` in this format (`tolerance`: that of the typed pieces, see
+    /// [`typed::tolerance`]).
+    pub fn write(self, path: &std::path::Path, curves: &(impl Curves + ?Sized), crs: &crate::crs::Crs, tolerance: f64) -> crate::Result<()> {
         match self {
             Format::Obj => write_obj(path, curves, crs),
             Format::Ply => write_ply(path, curves, crs),
             Format::Geojson => write_geojson(path, curves, crs),
             Format::Gpkg => write_gpkg(path, curves, crs),
             Format::Dxf => write_dxf(path, curves, crs),
+            Format::Json => typed::write_pieces(path, curves, crs, tolerance),
         }
     }
 }

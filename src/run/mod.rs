@@ -4,19 +4,50 @@
 //! orchestrates: the manifest, the plan, bucketing, the tile pass engine, the record codec of
 //! the per-tile results, and status.
 //!
+//! 1. **Plan** from the headers: bounds, counts, CRS, a tile grid (2D for airborne-like extents,
+//!    3D otherwise) sized from `--memory` (a tile holds at most [`MAX_TILE_POINTS`]).
+//! 2. **Bucket**: one streaming pass over the inputs writes every point once, to its tile,
+//!    zstd-compressed in spatial chunks (16 per tile edge, each headed by its bounding box), so
+//!    that assembling a tile's halo decompresses only the neighbours' border chunks.
+//! 3. **Tile passes** (statistics, residuals, projection), each tile with its halo: one loader
+//!    thread reads the next tile while the current one is computed on all cores.
+//! 4. **Curves**, a growth block of the edge cloud at a time (blocks depend on the edge cloud,
+//!    not on the tiles); the blocks' pieces of polylines are read a slab at a time, stitched and
+//!    completed a cluster at a time, and written a batch at a time, so that no step holds every
+//!    polyline (see [`crate::extract`] for the method of each step).
+//! 5. **Write** the outputs from the finished batches; the output filters apply last.
+//!
 //! Run directory layout:
 //! - `manifest.json`: the job (inputs with size, mtime and header checksum; parameters; crease
 //!   version), the plan (grid), and what is done;
-//! - `tiles/`: bucketed points; `stats/`, `resid/`, `edges/`: one result file per tile and pass,
-//!   each a record of the codec (see `codec.rs`);
-//! - `curves.obj`, `curves.ply`, `curves.geojson`, `report.json`: the outputs;
-//! - `lock`, and `lock.<i>` for worker `i` of several sharing the run ([`run_worker`]).
+//! - `tiles/`: bucketed points; `stats/`, `resid/`, `edges/`: one result file per tile and pass;
+//!   `survey/`, `smoothed/`, `pieces/`: the curve stage's, one file per growth block;
+//!   `finished/`: the curves a batch at a time; each file a record of the codec (see `codec.rs`:
+//!   a header with the kind of record, a format number and a CRC-32, then a zstd payload);
+//! - `curves.*`, `preview.png`, `report.json`: the outputs;
+//! - `lock`, and `lock.<i>` for worker `i` of several sharing the run ([`run_worker`]), removed
+//!   when the run ends.
 //!
-//! With `--work-dir`, the working data (`tiles/` and the per-tile results) is in that
-//! directory instead, which names its run in `crease-run`.
+//! With `--work-dir`, the working data is in that directory instead, which names its run in
+//! `crease-run`. The working data lets an interrupted run continue and a finished one write its
+//! outputs again with other output settings; `--clean` removes it, and the run is then final.
+//! A damaged per-tile or per-block result is computed again and listed in `report.json`
+//! (`repaired`); a damaged tile store or manifest stops the run naming the file (exit 65).
 //!
 //! Every file is written to a temporary name, synced and renamed, and only then counted as
 //! done, so a run killed at any moment resumes where it stopped and ends with the same curves.
+//! Results do not depend on the tiling, the thread count, or how the cloud is split into files:
+//! random choices are keyed by point position and neighbourhoods are ordered by coordinates;
+//! whether a point lies in a ball is decided in f64 (the f32 tree is queried wide enough for its
+//! coordinates' rounding); a sparse neighbourhood is widened no farther than the halo, and a
+//! statistics sample whose ball reaches past the halo is recomputed with a wider one; tau is an
+//! exact fixed-point sum, and spacing, noise and tau are rounded to 32 significant bits, so the
+//! last bits of tile-local arithmetic cannot flip a decision.
+//!
+//! Workers ([`run_worker`], `--worker I/N`) share a run over a directory they all see: each
+//! does what is left of its share of the first unfinished pass (tiles `t % N == I`; then a run of
+//! neighbouring growth blocks) and exits 0 when it must wait for the others; worker 0 also plans,
+//! buckets, and, once every block is grown, stitches, completes and writes the outputs.
 
 pub(crate) mod bucket;
 mod curves;
@@ -32,7 +63,7 @@ pub use plan::{tile_size_for, BYTES_PER_POINT, MAX_TILE_POINTS};
 pub use status::{render_status, status, Status};
 
 use crate::cancel::Cancel;
-use crate::curves::{Curves, Format, Outside, Polyline, Shape};
+use crate::curves::{typed, Curves, Format, Outside, Polyline, Shape};
 use crate::debug::DebugDump;
 use crate::error::{Error, Result};
 use crate::extract::candidates::{self, ResidualSum};
@@ -508,7 +539,7 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
     let curves = run.finished_curves(batches);
     let shapes = ShapeCounts::of(&curves)?;
     let t = Instant::now();
-    write_outputs(run.ws.root(), &curves, &crs, &run.preview_sample()?, &opts.formats)?;
+    write_outputs(run.ws.root(), &curves, &crs, &run.preview_sample()?, &opts.formats, typed::tolerance(r.kappa, r.noise))?;
     run.finished(t)?;
     for h in &headers {
         warnings.extend(coarse_coordinates(h, &run.manifest.grid, r.kappa));
@@ -1205,12 +1236,12 @@ pub const OUTPUTS: [&str; 7] = ["curves.obj", "curves.ply", "curves.geojson", "c
 /// Written on demand by [`write_view`].
 const VIEW: &str = "view.html";
 
-fn write_outputs(dir: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, sample: &[DVec3], formats: &[Format]) -> Result<()> {
+fn write_outputs(dir: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, sample: &[DVec3], formats: &[Format], tolerance: f64) -> Result<()> {
     // Each output goes to a temporary name first, then is renamed into place.
     let tmp = dir.join("out.tmp");
     std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
     let (written, preview) = rayon::join(
-        || formats.iter().try_for_each(|f| f.write(&tmp.join(f.file_name()), curves, crs)),
+        || formats.iter().try_for_each(|f| f.write(&tmp.join(f.file_name()), curves, crs, tolerance)),
         || crate::preview::write_png(&tmp.join("preview.png"), sample, curves),
     );
     written.and(preview)?;

@@ -16,4 +16,5 @@ mod real_files;
 mod synth;
 mod text_clouds;
 mod tiles;
+mod typed;
 mod workers;

@@ -1,0 +1,142 @@
+#!/usr/bin/env python3
+"""Typed curves on a corpus of machined parts: the share of truth edges recovered as one piece of
+the right type (a line between the edge's ends; a circle, or an arc between the edge's ends, of
+its centre, axis and radius), the
+circles' radius error, and the pieces written against the truth's edge count.
+
+A corpus is a folder of NAME.off meshes with NAME.truth.obj and NAME.json (its `edges` give
+each truth edge's `kind`, line, circle or other, and a circle's centre, axis and radius), as
+`../shared/data/cad/` or the output of `../shared/tools/cad_corpus.py`. Clouds are those of
+scripts/corpus.py (the same cache folder).
+
+    scripts/typed-curves.py [CORPUS ...] [--work DIR] [--levels "0 k2"] [--bin BIN] [--tol 0.01]
+
+An edge counts as recovered when a piece of its kind matches it within TOL dB: a line whose ends
+lie within TOL of the edge's ends, a circle (for an open circular edge: an arc whose ends lie within
+TOL of the edge's) whose centre and radius are within TOL and whose axis is within 5 degrees of
+the edge's.
+"""
+import argparse
+import json
+import math
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import corpus  # noqa: E402  (the clouds and their cache)
+
+
+def truth_lines(obj):
+    verts, lines = [], []
+    for line in Path(obj).read_text().splitlines():
+        s = line.split()
+        if s and s[0] == "v":
+            verts.append(tuple(map(float, s[1:4])))
+        elif s and s[0] == "l":
+            lines.append([verts[int(x.split("/")[0]) - 1] for x in s[1:]])
+    return lines
+
+
+def dist(a, b):
+    return math.dist(a, b)
+
+
+def matches(edge, ends, piece, tol):
+    if edge["kind"] == "line" and piece["kind"] == "line":
+        a, b = ends
+        s, e = piece["start"], piece["end"]
+        return max(dist(a, s), dist(b, e)) <= tol or max(dist(a, e), dist(b, s)) <= tol
+    # (A truth circle that is not closed is an arc: matched by an arc between its ends.)
+    if edge["kind"] == "circle" and piece["kind"] == ("circle" if edge["closed"] else "arc"):
+        ax, pax = edge["axis"], piece["axis"]
+        cos = abs(sum(x * y for x, y in zip(ax, pax))) / (math.hypot(*ax) * math.hypot(*pax))
+        a, b = ends
+        s, e = piece["start"], piece["end"]
+        ends_meet = edge["closed"] or max(dist(a, s), dist(b, e)) <= tol or max(dist(a, e), dist(b, s)) <= tol
+        return (ends_meet and dist(edge["center"], piece["centre"]) <= tol and abs(edge["radius"] - piece["radius"]) <= tol
+                and cos >= math.cos(math.radians(5)))
+    return False
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("corpus", nargs="*", default=["../shared/data/cad"])
+    ap.add_argument("--work", default=None)
+    ap.add_argument("--points", type=int, default=500000)
+    ap.add_argument("--levels", default="0 k2")
+    ap.add_argument("--bin", default=None)
+    ap.add_argument("--tol", type=float, default=0.01, help="match tolerance, dB")
+    args, extra = ap.parse_known_args()
+    extra = [a for a in extra if a != "--"]
+    root = Path(__file__).resolve().parent.parent
+    if args.bin:
+        binary = Path(args.bin).resolve()
+    else:
+        subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=root, check=True)
+        binary = root / "target/release/crease"
+    work = Path(args.work or os.environ.get("TMPDIR", "/tmp")) / "crease-corpus"
+    work.mkdir(parents=True, exist_ok=True)
+    parts = [off.resolve() for c in args.corpus for off in sorted(Path(c).glob("*.off"))
+             if off.with_suffix(".json").exists() and off.with_suffix("").with_suffix(".truth.obj").exists()]
+    if not parts:
+        sys.exit(f"typed-curves.py: no NAME.off with NAME.json and NAME.truth.obj in {args.corpus}")
+    print(f"{len(parts)} parts, {args.points} points; edges recovered as one piece of their type within {args.tol} dB")
+    print()
+    print("| noise | lines | circles and arcs | all typed edges | circle radius error, median (share of r) | pieces / truth edges |")
+    print("|---|---|---|---|---|---|")
+    for level in args.levels.split():
+        found = {"line": [0, 0], "circle": [0, 0]}
+        radius_errors, piece_counts, edge_counts = [], 0, 0
+        for off in parts:
+            name = f"{off.parent.name}_{off.stem}"
+            cloud = work / f"{name}_{level}_{args.points}.las"
+            if not cloud.exists():
+                part = cloud.with_suffix(f".part{os.getpid()}.las")
+                subprocess.run([str(binary), "synth", "mesh", str(off), "-n", str(args.points), "-o", str(part)]
+                               + corpus.noise_args(level), check=True, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+                part.with_suffix(".truth.obj").unlink()
+                part.rename(cloud)
+            out = work / f"typed_{name}_{level}"
+            shutil.rmtree(out, ignore_errors=True)
+            subprocess.run([str(binary), "extract", str(cloud), "-o", str(out), "-q", "--format", "obj,json"] + extra,
+                           check=True)
+            pieces = json.loads((out / "curves.json").read_text())["pieces"]
+            shutil.rmtree(out, ignore_errors=True)
+            meta = json.loads(off.with_suffix(".json").read_text())
+            tol = args.tol * meta["bbox_diag"]
+            lines = truth_lines(off.with_suffix("").with_suffix(".truth.obj"))
+            piece_counts += len(pieces)
+            edge_counts += len(meta["edges"])
+            part_found = {"line": [0, 0], "circle": [0, 0]}
+            for edge in meta["edges"]:
+                if edge["kind"] not in found:
+                    continue
+                poly = lines[edge["obj_line"] - 1]
+                hit = [p for p in pieces if matches(edge, (poly[0], poly[-1]), p, tol)]
+                part_found[edge["kind"]][1] += 1
+                if hit:
+                    part_found[edge["kind"]][0] += 1
+                    if edge["kind"] == "circle":
+                        best = min(hit, key=lambda p: abs(p["radius"] - edge["radius"]))
+                        radius_errors.append(abs(best["radius"] - edge["radius"]) / edge["radius"])
+            for k in found:
+                found[k][0] += part_found[k][0]
+                found[k][1] += part_found[k][1]
+            print(f"  {name} {level}: lines {part_found['line'][0]}/{part_found['line'][1]}, circles "
+                  f"{part_found['circle'][0]}/{part_found['circle'][1]}, {len(pieces)} pieces for "
+                  f"{len(meta['edges'])} edges", file=sys.stderr, flush=True)
+        share = lambda k: f"{found[k][0] / found[k][1]:.3f} ({found[k][0]} of {found[k][1]})" if found[k][1] else "-"
+        both = [found["line"][0] + found["circle"][0], found["line"][1] + found["circle"][1]]
+        label = f"{level[1:]} spacings" if level.startswith("k") else ("none" if level == "0" else f"{level} dB")
+        rerr = f"{statistics.median(radius_errors):.4f}" if radius_errors else "-"
+        print(f"| {label} | {share('line')} | {share('circle')} | {both[0] / max(both[1], 1):.3f} | {rerr} | "
+              f"{piece_counts / max(edge_counts, 1):.2f} |")
+
+
+if __name__ == "__main__":
+    main()

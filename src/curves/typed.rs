@@ -1,0 +1,450 @@
+//! Typed curves: each curve split at its corners and where its shape changes, each piece the
+//! simplest of a straight line segment, a circular arc and a full circle that holds within a
+//! tolerance over its whole span. What no such fit holds for more than one step stays a
+//! polyline run. A piece starts and ends on vertices of its curve, so pieces that meet share
+//! their end points exactly, corners included.
+//!
+//! ```
+//! use crease::curves::{typed, Polyline};
+//! use glam::DVec3;
+//! // Two straight runs meeting at a corner, sampled every 0.1.
+//! let mut pl = Polyline::from_points(7, (0..=20).map(|k| {
+//!     let t = k as f64 / 10.0;
+//!     if t <= 1.0 { DVec3::new(t, 0.0, 0.0) } else { DVec3::new(1.0, t - 1.0, 0.0) }
+//! }));
+//! pl.vertices[10].corner = true;
+//! let pieces = typed::pieces(&pl, 1e-6);
+//! assert_eq!(pieces.len(), 2);
+//! assert!(pieces.iter().all(|p| p.kind == typed::Kind::Line));
+//! assert_eq!(pieces[0].end, pieces[1].start);
+//! ```
+
+use super::{Curves, Polyline, Shape};
+use crate::crs::Crs;
+use crate::error::{Error, Result};
+use glam::{DVec3, Vec3};
+use serde::Serialize;
+use std::f64::consts::TAU;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+/// What a piece is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    /// A straight segment from `start` to `end`.
+    Line,
+    /// A circular arc from `start` to `end`, counterclockwise about `axis`.
+    Arc,
+    /// A full circle (a closed curve without corners); `start` and `end` are one vertex.
+    Circle,
+    /// The curve's own vertices, where no line or arc holds for more than one step.
+    Polyline,
+}
+
+/// One piece of a typed curve.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Piece {
+    /// Id of the curve the piece belongs to.
+    pub curve: u32,
+    /// Its type.
+    pub kind: Kind,
+    /// Index of its first vertex in the curve's polyline.
+    pub first: usize,
+    /// Number of the curve's segments it spans.
+    pub segments: usize,
+    /// First point (a vertex of the curve).
+    pub start: DVec3,
+    /// Last point (a vertex of the curve).
+    pub end: DVec3,
+    /// Centre of an arc or circle.
+    pub centre: Option<DVec3>,
+    /// Unit axis of an arc or circle: the direction of travel turns counterclockwise about it.
+    pub axis: Option<DVec3>,
+    /// Radius of an arc or circle.
+    pub radius: Option<f64>,
+    /// Angle an arc sweeps, in degrees (360 for a circle).
+    pub sweep_deg: Option<f64>,
+    /// Largest distance of a vertex of its span from it.
+    pub error: f64,
+}
+
+/// A circle through three points: centre, unit axis (counterclockwise from the first through
+/// the second to the third) and radius; None where the points are (nearly) on one line.
+fn circle_through(a: DVec3, b: DVec3, c: DVec3) -> Option<(DVec3, DVec3, f64)> {
+    let (u, w) = (b - a, c - a);
+    let n = u.cross(w);
+    let nn = n.length_squared();
+    if nn <= 1e-24 * (u.length_squared() * w.length_squared()).max(f64::MIN_POSITIVE) {
+        return None;
+    }
+    let centre = a + (u.length_squared() * w - w.length_squared() * u).cross(n) / (2.0 * nn);
+    Some((centre, n / nn.sqrt(), centre.distance(a)))
+}
+
+/// Angle of `p` about the circle (`centre`, `axis`) from `from`, in [0, 2 pi).
+fn angle_about(p: DVec3, from: DVec3, centre: DVec3, axis: DVec3) -> f64 {
+    let (x, y) = (from - centre, p - centre);
+    let a = axis.dot(x.cross(y)).atan2(x.dot(y) - x.dot(axis) * y.dot(axis));
+    if a < 0.0 {
+        a + TAU
+    } else {
+        a
+    }
+}
+
+/// Distance of `p` from the circle (`centre`, `axis`, `r`).
+fn off_circle(p: DVec3, centre: DVec3, axis: DVec3, r: f64) -> f64 {
+    let d = p - centre;
+    let h = d.dot(axis);
+    let radial = (d - h * axis).length() - r;
+    (radial * radial + h * h).sqrt()
+}
+
+/// Distance of `p` from the segment `a`-`b`.
+fn off_segment(p: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let ab = b - a;
+    let t = if ab.length_squared() > 0.0 { ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
+    p.distance(a + t * ab)
+}
+
+/// Largest distance of `pts` from the segment between their ends.
+fn line_error(pts: &[DVec3]) -> f64 {
+    let (a, b) = (pts[0], pts[pts.len() - 1]);
+    pts.iter().map(|&p| off_segment(p, a, b)).fold(0.0, f64::max)
+}
+
+/// The arc through the ends of `pts` and their middle vertex, if every vertex lies within
+/// `tol` of it and they follow it in order: (centre, axis, radius, sweep in radians, error).
+fn arc_fit(pts: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64, f64)> {
+    let m = pts.len();
+    if m < 4 {
+        return None;
+    }
+    let (a, b) = (pts[0], pts[m - 1]);
+    let (centre, axis, r) = circle_through(a, pts[m / 2], b)?;
+    let mut last = 0.0;
+    let mut error = 0.0f64;
+    for &p in &pts[1..] {
+        let e = off_circle(p, centre, axis, r);
+        let t = angle_about(p, a, centre, axis);
+        // (The last vertex may sit at the start again, a whole turn on.)
+        let t = if p == b && t < last { t + TAU } else { t };
+        if e > tol || t < last {
+            return None;
+        }
+        error = error.max(e);
+        last = t;
+    }
+    Some((centre, axis, r, last, error))
+}
+
+/// A closed curve's vertices as one circle, if they all lie within `tol` of it and go round
+/// it once, in order.
+fn circle_fit(v: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64)> {
+    let n = v.len();
+    if n < 6 {
+        return None;
+    }
+    let (centre, axis, r) = circle_through(v[0], v[n / 3], v[2 * n / 3])?;
+    let mut last = 0.0;
+    let mut error = 0.0f64;
+    for &p in &v[1..] {
+        let e = off_circle(p, centre, axis, r);
+        let t = angle_about(p, v[0], centre, axis);
+        if e > tol || t < last {
+            return None;
+        }
+        error = error.max(e);
+        last = t;
+    }
+    Some((centre, axis, r, error))
+}
+
+/// The pieces of curve `pl`, each within `tol` of every vertex it spans.
+pub fn pieces(pl: &Polyline, tol: f64) -> Vec<Piece> {
+    let v: Vec<DVec3> = pl.vertices.iter().map(|x| x.p).collect();
+    let n = v.len();
+    if n < 2 {
+        return Vec::new();
+    }
+    let corners: Vec<usize> = (0..n).filter(|&i| pl.vertices[i].corner).collect();
+    if pl.closed
+        && corners.is_empty()
+        && let Some((centre, axis, r, error)) = circle_fit(&v, tol)
+    {
+        return vec![Piece {
+            curve: pl.id,
+            kind: Kind::Circle,
+            first: 0,
+            segments: n,
+            start: v[0],
+            end: v[0],
+            centre: Some(centre),
+            axis: Some(axis),
+            radius: Some(r),
+            sweep_deg: Some(360.0),
+            error,
+        }];
+    }
+    // Runs between corners, as vertex indices (a closed curve's wrap round to its start).
+    let mut runs: Vec<Vec<usize>> = Vec::new();
+    if pl.closed {
+        let start = corners.first().copied().unwrap_or(0);
+        let order: Vec<usize> = (0..=n).map(|k| (start + k) % n).collect();
+        let mut run = vec![order[0]];
+        for &i in &order[1..] {
+            run.push(i);
+            if pl.vertices[i].corner {
+                runs.push(std::mem::replace(&mut run, vec![i]));
+            }
+        }
+        if run.len() > 1 {
+            runs.push(run);
+        }
+    } else {
+        let mut run = vec![0];
+        for i in 1..n {
+            run.push(i);
+            if pl.vertices[i].corner || i == n - 1 {
+                runs.push(std::mem::replace(&mut run, vec![i]));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for run in &runs {
+        type_run(pl.id, run, &v, tol, &mut out);
+    }
+    out
+}
+
+/// Types one run between corners: greedily, the longest line or arc from each piece's start
+/// (the line where it reaches as far); runs of single steps that neither holds beyond become
+/// one polyline piece.
+fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piece>) {
+    let pts: Vec<DVec3> = run.iter().map(|&i| v[i]).collect();
+    let m = pts.len();
+    let piece = |kind, i: usize, j: usize| Piece {
+        curve,
+        kind,
+        first: run[i],
+        segments: j - i,
+        start: pts[i],
+        end: pts[j],
+        centre: None,
+        axis: None,
+        radius: None,
+        sweep_deg: None,
+        error: 0.0,
+    };
+    let mut i = 0;
+    let mut loose: Option<usize> = None;
+    let flush = |loose: &mut Option<usize>, to: usize, out: &mut Vec<Piece>| {
+        if let Some(from) = loose.take() {
+            let mut p = piece(if to - from > 1 { Kind::Polyline } else { Kind::Line }, from, to);
+            p.error = if to - from > 1 { 0.0 } else { line_error(&pts[from..=to]) };
+            out.push(p);
+        }
+    };
+    while i + 1 < m {
+        let mut jl = i + 1;
+        while jl + 1 < m && line_error(&pts[i..=jl + 1]) <= tol {
+            jl += 1;
+        }
+        let mut arc = None;
+        let mut ja = i + 3;
+        while ja < m
+            && let Some(fit) = arc_fit(&pts[i..=ja], tol)
+        {
+            arc = Some((ja, fit));
+            ja += 1;
+        }
+        // (An arc that bows out from its chord by no more than twice the tolerance cannot be
+        // told from a line at that tolerance: the line, the simpler type, is taken.)
+        let bows = |r: f64, sweep: f64| r * (1.0 - (0.5 * sweep.min(std::f64::consts::PI)).cos()) > 2.0 * tol;
+        match arc {
+            Some((ja, (centre, axis, r, sweep, error))) if ja > jl && bows(r, sweep) => {
+                flush(&mut loose, i, out);
+                out.push(Piece {
+                    centre: Some(centre),
+                    axis: Some(axis),
+                    radius: Some(r),
+                    sweep_deg: Some(sweep.to_degrees()),
+                    error,
+                    ..piece(Kind::Arc, i, ja)
+                });
+                i = ja;
+            }
+            _ if jl == i + 1 && m > 2 => {
+                loose.get_or_insert(i);
+                i = jl;
+            }
+            _ => {
+                flush(&mut loose, i, out);
+                out.push(Piece { error: line_error(&pts[i..=jl]), ..piece(Kind::Line, i, jl) });
+                i = jl;
+            }
+        }
+    }
+    flush(&mut loose, m - 1, out);
+}
+
+/// The tolerance of the typed pieces of a run: two noise deviations, or half the spacing on a
+/// clean cloud. A curve's vertices stray from its edge by up to about two deviations (99 % of
+/// them on a machined part at 2 spacings of noise), so a tighter piece would follow the noise.
+pub fn tolerance(kappa: f64, noise: f64) -> f64 {
+    (2.0 * noise).max(0.5 * kappa)
+}
+
+/// Writes `curves.json`: the pieces of every curve within `tol` (see [`pieces`]), one JSON
+/// record a piece with its curve's confidence and shape and the two surface normals at its
+/// ends.
+pub fn write_pieces(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
+    let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
+    let mut w = BufWriter::new(f);
+    let out = |e| Error::output(path, e);
+    let crs = serde_json::to_string(&crs.summary()).expect("a string");
+    write!(w, "{{\"tolerance\":{tol},\"crs\":{crs},\"pieces\":[").map_err(out)?;
+    let mut first = true;
+    curves.each(&mut |c| {
+        for p in pieces(c, tol) {
+            let n = c.vertices.len();
+            let at = |k: usize| c.vertices[k % n].n;
+            let record = Record { piece: &p, confidence: c.confidence, shape: c.shape, normals_start: at(p.first), normals_end: at(p.first + p.segments) };
+            let record = serde_json::to_string(&record).expect("plain data");
+            write!(w, "{}\n{record}", if first { "" } else { "," }).map_err(out)?;
+            first = false;
+        }
+        Ok(())
+    })?;
+    writeln!(w, "\n]}}").map_err(out)?;
+    w.flush().map_err(out)
+}
+
+/// A piece as `curves.json` holds it.
+#[derive(Serialize)]
+struct Record<'a> {
+    #[serde(flatten)]
+    piece: &'a Piece,
+    confidence: f32,
+    shape: Shape,
+    normals_start: [Vec3; 2],
+    normals_end: [Vec3; 2],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::curves::Vertex;
+
+    fn polyline(pts: impl IntoIterator<Item = DVec3>, closed: bool) -> Polyline {
+        let mut pl = Polyline::from_points(1, pts);
+        pl.closed = closed;
+        pl
+    }
+
+    /// Every piece lies within the tolerance of every vertex it spans, and consecutive pieces
+    /// share their ends.
+    fn check(pl: &Polyline, pieces: &[Piece], tol: f64) {
+        let n = pl.vertices.len();
+        let mut next = pieces[0].first;
+        for p in pieces {
+            assert_eq!(p.first, next % n, "pieces follow each other");
+            let span: Vec<DVec3> = (0..=p.segments).map(|k| pl.vertices[(p.first + k) % n].p).collect();
+            assert_eq!(p.start, span[0]);
+            assert_eq!(p.end, span[p.segments]);
+            for &q in &span {
+                let d = match p.kind {
+                    Kind::Line => off_segment(q, p.start, p.end),
+                    Kind::Arc | Kind::Circle => off_circle(q, p.centre.unwrap(), p.axis.unwrap(), p.radius.unwrap()),
+                    Kind::Polyline => 0.0,
+                };
+                assert!(d <= tol, "{:?} misses a vertex by {d}", p.kind);
+            }
+            next = p.first + p.segments;
+        }
+        assert_eq!(pieces.iter().map(|p| p.segments).sum::<usize>(), pl.segment_count());
+    }
+
+    #[test]
+    fn a_noisy_circle_is_one_circle_of_its_radius() {
+        let mut rng = crate::rng::Rng::stream(2, 0);
+        let (c, r) = (DVec3::new(3.0, -2.0, 1.0), 2.5);
+        let pts: Vec<DVec3> =
+            (0..200).map(|k| k as f64 * TAU / 200.0).map(|t| c + DVec3::new(r * t.cos(), 0.0, r * t.sin()) + 0.002 * (rng.in_ball(1.0))).collect();
+        let pl = polyline(pts, true);
+        let pieces = pieces(&pl, 0.01);
+        assert_eq!(pieces.len(), 1);
+        assert_eq!(pieces[0].kind, Kind::Circle);
+        assert!((pieces[0].radius.unwrap() - r).abs() < 0.01);
+        assert!(pieces[0].axis.unwrap().y.abs() > 0.999);
+        check(&pl, &pieces, 0.01);
+    }
+
+    #[test]
+    fn a_slot_outline_is_two_lines_and_two_arcs() {
+        // A stadium: two straight sides 4 long, two half circles of radius 1, as one closed
+        // curve without corners (the sides meet the arcs tangentially).
+        let mut pts = Vec::new();
+        for k in 0..40 {
+            pts.push(DVec3::new(-2.0 + 0.1 * k as f64, -1.0, 0.0));
+        }
+        for k in 0..30 {
+            let t = -TAU / 4.0 + k as f64 * (TAU / 2.0) / 30.0;
+            pts.push(DVec3::new(2.0 + t.cos(), t.sin(), 0.0));
+        }
+        for k in 0..40 {
+            pts.push(DVec3::new(2.0 - 0.1 * k as f64, 1.0, 0.0));
+        }
+        for k in 0..30 {
+            let t = TAU / 4.0 + k as f64 * (TAU / 2.0) / 30.0;
+            pts.push(DVec3::new(-2.0 + t.cos(), t.sin(), 0.0));
+        }
+        let pl = polyline(pts, true);
+        let pieces = pieces(&pl, 1e-3);
+        let kinds: Vec<Kind> = pieces.iter().map(|p| p.kind).collect();
+        assert_eq!(kinds.iter().filter(|&&k| k == Kind::Line).count(), 2, "{kinds:?}");
+        assert_eq!(kinds.iter().filter(|&&k| k == Kind::Arc).count(), 2, "{kinds:?}");
+        for p in pieces.iter().filter(|p| p.kind == Kind::Arc) {
+            assert!((p.radius.unwrap() - 1.0).abs() < 1e-6);
+            assert!((p.sweep_deg.unwrap() - 180.0).abs() < 7.0, "{}", p.sweep_deg.unwrap());
+        }
+        check(&pl, &pieces, 1e-3);
+    }
+
+    #[test]
+    fn corners_split_pieces_and_are_shared() {
+        // A square's outline with its four corners flagged.
+        let mut pts = Vec::new();
+        let sq = [DVec3::ZERO, DVec3::X, DVec3::X + DVec3::Y, DVec3::Y];
+        for s in 0..4 {
+            for k in 0..10 {
+                pts.push(sq[s].lerp(sq[(s + 1) % 4], k as f64 / 10.0));
+            }
+        }
+        let mut pl = polyline(pts, true);
+        for k in [0, 10, 20, 30] {
+            pl.vertices[k].corner = true;
+        }
+        let pieces = pieces(&pl, 1e-9);
+        assert_eq!(pieces.len(), 4);
+        for (p, q) in pieces.iter().zip(pieces.iter().cycle().skip(1)) {
+            assert_eq!(p.kind, Kind::Line);
+            assert_eq!(p.end, q.start);
+            assert!(sq.contains(&p.start));
+        }
+        check(&pl, &pieces, 1e-9);
+    }
+
+    #[test]
+    fn a_wiggle_stays_a_polyline_and_pieces_cover_the_curve() {
+        // A zigzag whose every step turns: nothing longer than a step fits.
+        let pts: Vec<DVec3> = (0..12).map(|k| DVec3::new(k as f64, if k % 2 == 0 { 0.0 } else { 1.0 }, 0.0)).collect();
+        let mut pl = polyline(pts, false);
+        pl.vertices.push(Vertex::at(DVec3::new(12.0, 0.0, 0.0)));
+        let pieces = pieces(&pl, 0.01);
+        assert_eq!(pieces.len(), 1, "{pieces:?}");
+        assert_eq!(pieces[0].kind, Kind::Polyline);
+        check(&pl, &pieces, 0.01);
+    }
+}
