@@ -11,10 +11,11 @@ scripts/corpus.py (the same cache folder).
 
     scripts/typed-curves.py [CORPUS ...] [--work DIR] [--levels "0 k2"] [--bin BIN] [--tol 0.01]
 
-An edge counts as recovered when a piece of its kind matches it within TOL dB: a line whose ends
-lie within TOL of the edge's ends, a circle (for an open circular edge: an arc whose ends lie within
-TOL of the edge's) whose centre and radius are within TOL and whose axis is within 5 degrees of
-the edge's.
+An edge counts as recovered when one piece of its kind holds all of it within TOL dB: a line
+segment within TOL of the edge's ends and middle; a circle (for an open circular edge, an arc or a
+circle) whose centre and radius are within TOL of the edge's, whose axis is within 5 degrees of
+it, and whose sweep holds the edge's points. A piece may run on past the edge's ends: a B-rep
+splits a rim or a line at vertices the surface does not show.
 """
 import argparse
 import json
@@ -45,20 +46,43 @@ def dist(a, b):
     return math.dist(a, b)
 
 
-def matches(edge, ends, piece, tol):
+def off_segment(p, a, b):
+    ab = [y - x for x, y in zip(a, b)]
+    t = max(0.0, min(1.0, sum((p[i] - a[i]) * ab[i] for i in range(3)) / max(sum(x * x for x in ab), 1e-300)))
+    return dist(p, [a[i] + t * ab[i] for i in range(3)])
+
+
+def on_arc(p, piece, tol):
+    """True if p lies within tol of the arc's circle and within its sweep."""
+    c, ax, r = piece["centre"], piece["axis"], piece["radius"]
+    n = math.hypot(*ax)
+    ax = [x / n for x in ax]
+    d = [p[i] - c[i] for i in range(3)]
+    h = sum(d[i] * ax[i] for i in range(3))
+    radial = [d[i] - h * ax[i] for i in range(3)]
+    if math.hypot(math.hypot(*radial) - r, h) > tol:
+        return False
+    if piece["kind"] == "circle":
+        return True
+    s = [piece["start"][i] - c[i] for i in range(3)]
+    cross = [s[1] * radial[2] - s[2] * radial[1], s[2] * radial[0] - s[0] * radial[2], s[0] * radial[1] - s[1] * radial[0]]
+    ang = math.atan2(sum(cross[i] * ax[i] for i in range(3)), sum(s[i] * radial[i] for i in range(3))) % (2 * math.pi)
+    slack = tol / max(r, 1e-300)
+    return ang <= math.radians(piece["sweep_deg"]) + slack or ang >= 2 * math.pi - slack
+
+
+def matches(edge, poly, piece, tol):
+    """A piece of the edge's kind that holds the whole edge within tol (it may run on past the
+    edge's ends, where the part has a B-rep vertex that the scan does not show)."""
     if edge["kind"] == "line" and piece["kind"] == "line":
-        a, b = ends
-        s, e = piece["start"], piece["end"]
-        return max(dist(a, s), dist(b, e)) <= tol or max(dist(a, e), dist(b, s)) <= tol
-    # (A truth circle that is not closed is an arc: matched by an arc between its ends.)
-    if edge["kind"] == "circle" and piece["kind"] == ("circle" if edge["closed"] else "arc"):
+        return all(off_segment(p, piece["start"], piece["end"]) <= tol for p in (poly[0], poly[len(poly) // 2], poly[-1]))
+    # (A truth circle that is not closed is an arc, held by an arc or a circle; a closed one
+    # only by a circle.)
+    if edge["kind"] == "circle" and piece["kind"] in (("circle",) if edge["closed"] else ("arc", "circle")):
         ax, pax = edge["axis"], piece["axis"]
         cos = abs(sum(x * y for x, y in zip(ax, pax))) / (math.hypot(*ax) * math.hypot(*pax))
-        a, b = ends
-        s, e = piece["start"], piece["end"]
-        ends_meet = edge["closed"] or max(dist(a, s), dist(b, e)) <= tol or max(dist(a, e), dist(b, s)) <= tol
-        return (ends_meet and dist(edge["center"], piece["centre"]) <= tol and abs(edge["radius"] - piece["radius"]) <= tol
-                and cos >= math.cos(math.radians(5)))
+        return (dist(edge["center"], piece["centre"]) <= tol and abs(edge["radius"] - piece["radius"]) <= tol
+                and cos >= math.cos(math.radians(5)) and all(on_arc(p, piece, tol) for p in poly[::max(1, len(poly) // 8)] + [poly[-1]]))
     return False
 
 
@@ -117,7 +141,7 @@ def main():
                 if edge["kind"] not in found:
                     continue
                 poly = lines[edge["obj_line"] - 1]
-                hit = [p for p in pieces if matches(edge, (poly[0], poly[-1]), p, tol)]
+                hit = [p for p in pieces if matches(edge, poly, p, tol)]
                 part_found[edge["kind"]][1] += 1
                 if hit:
                     part_found[edge["kind"]][0] += 1

@@ -36,7 +36,7 @@ pub enum Kind {
     Line,
     /// A circular arc from `start` to `end`, counterclockwise about `axis`.
     Arc,
-    /// A full circle (a closed curve without corners); `start` and `end` are one vertex.
+    /// A full circle (a closed curve all on one circle); `start` and `end` are one vertex.
     Circle,
     /// The curve's own vertices, where no line or arc holds for more than one step.
     Polyline,
@@ -169,8 +169,9 @@ pub fn pieces(pl: &Polyline, tol: f64) -> Vec<Piece> {
         return Vec::new();
     }
     let corners: Vec<usize> = (0..n).filter(|&i| pl.vertices[i].corner).collect();
+    // (A closed curve all of whose vertices lie on one circle is that circle, whatever corners
+    // completion put on it: two creases cannot meet at a corner on a smooth rim.)
     if pl.closed
-        && corners.is_empty()
         && let Some((centre, axis, r, error)) = circle_fit(&v, tol)
     {
         return vec![Piece {
@@ -379,6 +380,16 @@ mod tests {
         assert!((pieces[0].radius.unwrap() - r).abs() < 0.01);
         assert!(pieces[0].axis.unwrap().y.abs() > 0.999);
         check(&pl, &pieces, 0.01);
+    }
+
+    #[test]
+    fn a_rim_with_a_corner_put_on_it_is_still_one_circle() {
+        let pts: Vec<DVec3> = (0..60).map(|k| k as f64 * TAU / 60.0).map(|t| DVec3::new(t.cos(), t.sin(), 0.5)).collect();
+        let mut pl = polyline(pts, true);
+        pl.vertices[17].corner = true;
+        let pieces = pieces(&pl, 1e-6);
+        assert_eq!(pieces.iter().map(|p| p.kind).collect::<Vec<_>>(), [Kind::Circle]);
+        check(&pl, &pieces, 1e-6);
     }
 
     #[test]
