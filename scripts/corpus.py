@@ -46,6 +46,32 @@ def noise_args(level):
     return ["--noise", level]
 
 
+def setup(bin_arg, work_arg):
+    """The binary to score (this tree's release build unless one is given) and the cache folder
+    of clouds, made if need be."""
+    root = Path(__file__).resolve().parent.parent
+    if bin_arg:
+        binary = Path(bin_arg).resolve()
+    else:
+        subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=root, check=True)
+        binary = root / "target/release/crease"
+    work = Path(work_arg or os.environ.get("TMPDIR", "/tmp")) / "crease-corpus"
+    work.mkdir(parents=True, exist_ok=True)
+    return binary, work
+
+
+def sampled(binary, work, off, level, points):
+    """The cloud of part `off` at noise `level`, sampled once and kept in `work`."""
+    cloud = work / f"{off.parent.name}_{off.stem}_{level}_{points}.las"
+    if not cloud.exists():
+        part = cloud.with_suffix(f".part{os.getpid()}.las")
+        subprocess.run([str(binary), "synth", "mesh", str(off), "-n", str(points), "-o", str(part)]
+                       + noise_args(level), check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        part.with_suffix(".truth.obj").unlink()
+        part.rename(cloud)
+    return cloud
+
+
 def part_diag(off):
     meta = off.with_suffix(".json")
     if meta.exists():
@@ -74,14 +100,7 @@ def main():
     ap.add_argument("--only", default=None, help="only parts whose name contains this")
     args, extra = ap.parse_known_args()
     extra = [a for a in extra if a != "--"]
-    root = Path(__file__).resolve().parent.parent
-    if args.bin:
-        binary = Path(args.bin).resolve()
-    else:
-        subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=root, check=True)
-        binary = root / "target/release/crease"
-    work = Path(args.work or os.environ.get("TMPDIR", "/tmp")) / "crease-corpus"
-    work.mkdir(parents=True, exist_ok=True)
+    binary, work = setup(args.bin, args.work)
     tag = hashlib.md5(binary.read_bytes() + " ".join(extra).encode()).hexdigest()[:8]
     parts = []
     for c in args.corpus:
@@ -106,13 +125,7 @@ def main():
             if (name, level) in done:
                 rows.append(done[(name, level)])
                 continue
-            cloud = work / f"{name}_{level}_{args.points}.las"
-            if not cloud.exists():
-                part = cloud.with_suffix(f".part{os.getpid()}.las")
-                subprocess.run([str(binary), "synth", "mesh", str(off), "-n", str(args.points), "-o", str(part)]
-                               + noise_args(level), check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                part.with_suffix(".truth.obj").unlink()
-                part.rename(cloud)
+            cloud = sampled(binary, work, off, level, args.points)
             out = work / f"run_{tag}_{name}_{level}"
             shutil.rmtree(out, ignore_errors=True)
             t0 = time.perf_counter()

@@ -20,7 +20,6 @@ splits a rim or a line at vertices the surface does not show.
 import argparse
 import json
 import math
-import os
 import shutil
 import statistics
 import subprocess
@@ -96,14 +95,7 @@ def main():
     ap.add_argument("--tol", type=float, default=0.01, help="match tolerance, dB")
     args, extra = ap.parse_known_args()
     extra = [a for a in extra if a != "--"]
-    root = Path(__file__).resolve().parent.parent
-    if args.bin:
-        binary = Path(args.bin).resolve()
-    else:
-        subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=root, check=True)
-        binary = root / "target/release/crease"
-    work = Path(args.work or os.environ.get("TMPDIR", "/tmp")) / "crease-corpus"
-    work.mkdir(parents=True, exist_ok=True)
+    binary, work = corpus.setup(args.bin, args.work)
     parts = [off.resolve() for c in args.corpus for off in sorted(Path(c).glob("*.off"))
              if off.with_suffix(".json").exists() and off.with_suffix("").with_suffix(".truth.obj").exists()]
     if not parts:
@@ -117,14 +109,7 @@ def main():
         radius_errors, piece_counts, edge_counts = [], 0, 0
         for off in parts:
             name = f"{off.parent.name}_{off.stem}"
-            cloud = work / f"{name}_{level}_{args.points}.las"
-            if not cloud.exists():
-                part = cloud.with_suffix(f".part{os.getpid()}.las")
-                subprocess.run([str(binary), "synth", "mesh", str(off), "-n", str(args.points), "-o", str(part)]
-                               + corpus.noise_args(level), check=True, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL)
-                part.with_suffix(".truth.obj").unlink()
-                part.rename(cloud)
+            cloud = corpus.sampled(binary, work, off, level, args.points)
             out = work / f"typed_{name}_{level}"
             shutil.rmtree(out, ignore_errors=True)
             subprocess.run([str(binary), "extract", str(cloud), "-o", str(out), "-q", "--format", "obj,json"] + extra,
