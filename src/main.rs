@@ -154,7 +154,7 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Extracts feature curves; writes curves.obj, curves.ply, curves.geojson and report.json.
+    /// Extracts feature curves; writes curves.obj, curves.ply and curves.geojson (or the --format asked for), preview.png and report.json.
     Extract(ExtractArgs),
     /// Writes RUN/slurm/: an extraction as a chain of Slurm jobs (plan and bucketing, one
     /// array job per tile pass, one growing the curves' blocks, then the stitching and
