@@ -76,6 +76,10 @@ pub struct Manifest {
     /// The working data was removed once the outputs were written (`--clean`).
     #[serde(default)]
     pub cleaned: bool,
+    /// Number of workers sharing the run, if worker 0 planned it (`--worker 0/N`): workers of
+    /// another count would share the tiles out otherwise, leaving some to no one.
+    #[serde(default)]
+    pub workers: Option<u32>,
 }
 
 /// The stamp of input file `path`: size, modification time, hash of the first 64 KiB.

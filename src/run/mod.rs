@@ -514,7 +514,7 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
         }
         Ok((b, declared))
     };
-    let (manifest, resumed) = plan(&mut ws, job, bounds, opts)?;
+    let (manifest, resumed) = plan(&mut ws, job, bounds, opts, worker)?;
     // (Worker 0 writes the outputs, again if an output setting changed; the others had nothing
     // left to do once it finished, and were told to wait for ever.)
     if manifest.finished && !Worker::leads(worker) {
@@ -662,7 +662,7 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
     let mut ws = Workspace::memory();
     // (In memory there is no working data to put elsewhere or remove.)
     let opts = &RunOptions { work_dir: None, clean: false, ..opts.clone() };
-    let (manifest, _) = plan(&mut ws, job, bounds, opts)?;
+    let (manifest, _) = plan(&mut ws, job, bounds, opts, None)?;
     let mut run = Run::new(ws, manifest, opts, None);
     // (A lone run does every tile itself: it has nothing to wait for.)
     let r = run.tile_passes(&Input::Points(points), params, &here)?.ok_or_else(|| Error::Usage(run.waiting.take().unwrap_or_default()))?;
@@ -683,7 +683,7 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
 /// `bounds()`, sized from the budget); a different job is refused, and `--force` always starts
 /// over. Returns the
 /// manifest and whether the run resumes.
-fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions) -> Result<(Manifest, bool)> {
+fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions, worker: Option<Worker>) -> Result<(Manifest, bool)> {
     // (With --force, whatever the directory holds, damaged or not, is replaced; so is the
     // working data of the run it held, wherever that was.)
     let held = if opts.force {
@@ -710,6 +710,15 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
                 return Err(Error::Usage(format!(
                     "{}: this run keeps its working data in {was}: resume it with that --work-dir (or none), or use --force to start over",
                     ws.root().display()
+                )));
+            }
+            if let (Some(n), Some(w)) = (m.workers, worker)
+                && w.count != n
+            {
+                return Err(Error::Usage(format!(
+                    "{}: this run is shared by {n} workers (--worker I/{n}), not {}: give every worker the same count, or use --force (worker 0) to start over",
+                    ws.root().display(),
+                    w.count
                 )));
             }
             use_work_dir(ws, &m)?;
@@ -765,6 +774,7 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
         finished: false,
         work_dir,
         cleaned: false,
+        workers: worker.map(|w| w.count),
     };
     manifest::save(ws, &m)?;
     Ok((m, false))

@@ -88,6 +88,13 @@ fn workers_and_lone_runs_do_not_mix_and_each_index_runs_once() {
     let out = crease(&args(&["--worker", "0/2"]));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(run.join("manifest.json").exists());
+    // A worker of another count would share the tiles out otherwise: refused; one of the
+    // planned count goes on.
+    drop((shared, one));
+    refused(&["--worker", "1/3"], "shared by 2 workers");
+    refused(&["--worker", "0/3"], "shared by 2 workers");
+    let out = crease(&args(&["--worker", "1/2"]));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
 /// The job chain `crease slurm` writes, run by hand as Slurm would run it (each array job's
