@@ -133,6 +133,11 @@ impl E57Reader {
     }
 }
 
+/// Largest coordinate magnitude taken for a point (1e12 metres is beyond any scan): a float
+/// stream decoded at the wrong precision gives values up to 3e38, which would otherwise make
+/// bounds that no tiling can cover.
+const MAX_COORDINATE: f64 = 1e12;
+
 /// Starts decoding every scan of `path` on a thread of its own.
 fn decode(path: PathBuf) -> Receiver<Decoded> {
     let (tx, rx) = bounded::<Decoded>(2);
@@ -142,12 +147,19 @@ fn decode(path: PathBuf) -> Receiver<Decoded> {
             let mut index = 0u64;
             let mut chunk = PointChunk::default();
             let mut records = 0u64;
-            for pc in reader.pointclouds() {
+            for (scan, pc) in reader.pointclouds().into_iter().enumerate() {
                 let points = reader.pointcloud_simple(&pc).map_err(|e| e57_error(&path, e))?;
                 for p in points {
                     let p = p.map_err(|e| e57_error(&path, e))?;
                     if let e57::CartesianCoordinate::Valid { x, y, z } = p.cartesian {
-                        chunk.xyz.push(DVec3::new(x, y, z));
+                        let xyz = DVec3::new(x, y, z);
+                        if !xyz.is_finite() || xyz.abs().max_element() > MAX_COORDINATE {
+                            return Err(Error::input(
+                                &path,
+                                format!("scan {}, record {index}: the point ({x}, {y}, {z}) is not finite or lies beyond {MAX_COORDINATE:e} (a stream read at the wrong precision?)", scan + 1),
+                            ));
+                        }
+                        chunk.xyz.push(xyz);
                         chunk.class.push(0);
                         chunk.index.push(index);
                     }

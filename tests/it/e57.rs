@@ -188,3 +188,28 @@ fn scanner_positions_come_from_scans_stored_about_their_scanner() {
     let h = crease::io::read_header(&path).unwrap();
     assert_eq!(h.scanners, vec![DVec3::new(10.0, 20.0, 1.5), DVec3::new(-4.0, 0.0, 2.0)]);
 }
+
+/// A point that is not finite, or far beyond any scan (as a float stream decoded at the wrong
+/// precision gives), is refused in one line naming the file, by `info` and by `extract`.
+#[test]
+fn an_e57_point_not_finite_or_beyond_any_scan_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    for (name, bad) in [("nan", f64::NAN), ("inf", f64::INFINITY), ("huge", 2.9e38)] {
+        let path = d.path().join(format!("{name}.e57"));
+        let mut w = E57Writer::from_file(&path, "crease-test-file").unwrap();
+        let mut scan = w.add_pointcloud("scan-1", vec![Record::CARTESIAN_X_F64, Record::CARTESIAN_Y_F64, Record::CARTESIAN_Z_F64]).unwrap();
+        for k in 0..100 {
+            let x = if k == 57 { bad } else { k as f64 };
+            scan.add_point(vec![RecordValue::Double(x), RecordValue::Double(1.0), RecordValue::Double(2.0)]).unwrap();
+        }
+        scan.finalize().unwrap();
+        w.finalize().unwrap();
+        let run = d.path().join(format!("run-{name}"));
+        for args in [vec!["info", path.to_str().unwrap()], vec!["extract", path.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]] {
+            let (code, err) = crease(&args);
+            assert_eq!(code, crease::error::exit::DATA, "{name} {args:?}: {err}");
+            assert!(err.contains(path.to_str().unwrap()) && err.contains("record 57") && err.lines().count() == 1, "{name} {args:?}: {err}");
+        }
+        assert!(!run.join("curves.obj").exists());
+    }
+}
