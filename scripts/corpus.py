@@ -85,13 +85,20 @@ def part_diag(off):
     return sum((b - a) ** 2 for a, b in zip(lo, hi)) ** 0.5
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def arguments(doc, levels):
+    """The arguments every corpus script takes: corpus folders, cache folder, points, levels,
+    binary."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("corpus", nargs="*", default=["../shared/data/cad"])
     ap.add_argument("--work", default=None)
     ap.add_argument("--points", type=int, default=500000)
-    ap.add_argument("--levels", default="0 k1 k2 k4 0.005 0.01 0.02")
+    ap.add_argument("--levels", default=levels)
     ap.add_argument("--bin", default=None)
+    return ap
+
+
+def main():
+    ap = arguments(__doc__, "0 k1 k2 k4 0.005 0.01 0.02")
     ap.add_argument("--seed", default="1", help="the extraction's --seed")
     ap.add_argument("--json", default=None,
                     help="also write every part's row here, a JSON object a line, as each is scored; "

@@ -17,7 +17,6 @@ circle) whose centre and radius are within TOL of the edge's, whose axis is with
 it, and whose sweep holds the edge's points. A piece may run on past the edge's ends: a B-rep
 splits a rim or a line at vertices the surface does not show.
 """
-import argparse
 import json
 import math
 import shutil
@@ -86,12 +85,7 @@ def matches(edge, poly, piece, tol):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("corpus", nargs="*", default=["../shared/data/cad"])
-    ap.add_argument("--work", default=None)
-    ap.add_argument("--points", type=int, default=500000)
-    ap.add_argument("--levels", default="0 k2")
-    ap.add_argument("--bin", default=None)
+    ap = corpus.arguments(__doc__, "0 k2")
     ap.add_argument("--tol", type=float, default=0.01, help="match tolerance, dB")
     args, extra = ap.parse_known_args()
     extra = [a for a in extra if a != "--"]

@@ -252,8 +252,10 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
         while jl + 1 < m && line_error(&pts[i..=jl + 1]) <= tol {
             jl += 1;
         }
+        // (An arc is taken only where it reaches farther than the line: none can where the
+        // line reaches the run's end.)
         let mut arc = None;
-        let mut ja = i + 3;
+        let mut ja = if jl + 1 < m { i + 3 } else { m };
         while ja < m
             && let Some(fit) = arc_fit(&pts[i..=ja], tol)
         {
