@@ -48,6 +48,13 @@ impl Grid {
         Grid { origin: b.min, size, dims, layer: if flat { ext.z.max(1e-9) * 1.0001 + size } else { 0.0 } }
     }
 
+    /// The box the grid's tiles span (the 2D grid's layer in z).
+    pub fn span(&self) -> Bounds {
+        let height = if self.dims[2] == 1 && self.layer > 0.0 { self.layer } else { self.dims[2] as f64 * self.size };
+        let ext = [self.dims[0] as f64 * self.size, self.dims[1] as f64 * self.size, height];
+        Bounds { min: self.origin, max: std::array::from_fn(|a| self.origin[a] + ext[a]) }
+    }
+
     /// Number of tiles.
     pub fn len(&self) -> usize {
         self.tiles().min(usize::MAX as u64) as usize

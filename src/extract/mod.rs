@@ -57,8 +57,12 @@ use serde::{Deserialize, Serialize};
 /// Counts per stage.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Counts {
-    /// Input points.
+    /// Input points (after filtering, far points left out).
     pub points: u64,
+    /// Points left out as far from all the others (stray points that would have set the
+    /// bounds; see the run's far-point rule).
+    #[serde(default)]
+    pub far_points: u64,
     /// Points at which stages 1-2 were evaluated (fewer than the input where a noisy cloud is
     /// thinned, see [`Resolved::keep`]).
     #[serde(default)]

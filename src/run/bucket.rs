@@ -1,9 +1,11 @@
-//! Bucketing: one streaming pass over the inputs writes every point once, to its tile.
+//! Bucketing: one streaming pass over the inputs writes every point once, to its tile, and
+//! takes the cloud's spread along each axis, by which far points are found (see [`super::far`]).
 
+use super::far::Spread;
 use crate::cancel::Cancel;
 use crate::error::{Error, Result};
 use crate::io::{self, Filter, PointReader};
-use crate::points::PointChunk;
+use crate::points::{Bounds, PointChunk};
 use crate::progress::Bar;
 use crate::tiles::Bucketer;
 use glam::DVec3;
@@ -17,9 +19,22 @@ pub enum Input<'a> {
     Points(&'a [DVec3]),
 }
 
+/// Where bucketed points go: the tiles, if within the bounds kept (all, if none are set yet),
+/// and the spread.
+pub struct Sink<'a> {
+    /// The tiles.
+    pub tiles: Bucketer<'a>,
+    /// The spread of the points kept.
+    pub spread: Spread,
+    /// Points outside these bounds are left out as far (see [`super::far`]).
+    pub kept: Option<Bounds>,
+    /// Points left out as far.
+    pub far: u64,
+}
+
 /// Streams every point of `input` into `b`, counting the records read on `bar` (points left
 /// out by the filter count too, as the bar's total is the records the inputs declare).
-pub fn bucket(input: &Input, b: &mut Bucketer, bar: &Bar, cancel: &Cancel) -> Result<()> {
+pub fn bucket(input: &Input, b: &mut Sink, bar: &Bar, cancel: &Cancel) -> Result<()> {
     match input {
         Input::Points(points) => {
             for (k, part) in points.chunks(io::DEFAULT_CHUNK).enumerate() {
@@ -34,16 +49,33 @@ pub fn bucket(input: &Input, b: &mut Bucketer, bar: &Bar, cancel: &Cancel) -> Re
     }
 }
 
-fn add(b: &mut Bucketer, fi: usize, chunk: &PointChunk, cancel: &Cancel) -> Result<()> {
+fn add(b: &mut Sink, fi: usize, chunk: &PointChunk, cancel: &Cancel) -> Result<()> {
     // Global ids: file index in the high bits, record index in the low 40 bits.
     let gids: Vec<u64> = chunk.index.iter().map(|&i| ((fi as u64) << 40) | i).collect();
-    b.add(chunk, &gids)?;
+    match &b.kept {
+        Some(kept) if !chunk.xyz.iter().all(|&p| kept.contains(p)) => {
+            let inside: Vec<usize> = (0..chunk.len()).filter(|&k| kept.contains(chunk.xyz[k])).collect();
+            b.far += (chunk.len() - inside.len()) as u64;
+            let part = PointChunk {
+                xyz: inside.iter().map(|&k| chunk.xyz[k]).collect(),
+                class: inside.iter().map(|&k| chunk.class[k]).collect(),
+                index: inside.iter().map(|&k| chunk.index[k]).collect(),
+            };
+            let gids: Vec<u64> = inside.iter().map(|&k| gids[k]).collect();
+            b.spread.add(&part.xyz);
+            b.tiles.add(&part, &gids)?;
+        }
+        _ => {
+            b.spread.add(&chunk.xyz);
+            b.tiles.add(chunk, &gids)?;
+        }
+    }
     cancel.check()
 }
 
 /// The files are decoded on a thread of their own, one chunk ahead of the bucketing, so that
 /// decoding overlaps the sorting, compressing and writing of the tiles.
-fn bucket_files(files: &[PathBuf], filter: &Filter, b: &mut Bucketer, bar: &Bar, cancel: &Cancel) -> Result<()> {
+fn bucket_files(files: &[PathBuf], filter: &Filter, b: &mut Sink, bar: &Bar, cancel: &Cancel) -> Result<()> {
     let (tx, rx) = crossbeam_channel::bounded::<Result<(usize, PointChunk, usize)>>(0);
     std::thread::scope(|s| -> Result<()> {
         // Owning the receiver here drops it on any early return, which stops the reader.

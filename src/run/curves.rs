@@ -72,6 +72,7 @@ impl Run<'_> {
         let Survey { counts, blocks, grouped, origin, .. } = survey;
         let mut counts = Counts {
             points: self.manifest.tile_points.iter().sum(),
+            far_points: self.manifest.far_points,
             evaluated: self.evaluated,
             corners: grouped.len() as u64,
             blocks: blocks.list.len() as u64,

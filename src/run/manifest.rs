@@ -76,6 +76,13 @@ pub struct Manifest {
     /// The working data was removed once the outputs were written (`--clean`).
     #[serde(default)]
     pub cleaned: bool,
+    /// The bounds of the cloud without its far points, once bucketing found some (see
+    /// [`super::far`]): the grid is planned over them and the points outside are left out.
+    #[serde(default)]
+    pub kept: Option<crate::points::Bounds>,
+    /// Points left out as far from all the others.
+    #[serde(default)]
+    pub far_points: u64,
     /// Number of workers sharing the run, if worker 0 planned it (`--worker 0/N`): workers of
     /// another count would share the tiles out otherwise, leaving some to no one.
     #[serde(default)]

@@ -51,6 +51,7 @@
 
 pub(crate) mod bucket;
 mod curves;
+pub(crate) mod far;
 pub mod manifest;
 pub(crate) mod pass;
 pub mod plan;
@@ -524,6 +525,13 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
     let Some(r) = run.tile_passes(&Input::Files(&files, filter), params, &first)? else {
         return Ok(WorkerStep::Waiting(run.waiting.take().unwrap_or_default()));
     };
+    if let Some(kept) = run.manifest.kept.filter(|_| run.manifest.far_points > 0) {
+        warnings.push(format!(
+            "{} points lie far from all the others (farther out than the rest of the cloud is wide) and were left out; the rest lie within {}",
+            run.manifest.far_points,
+            kept.ranges()
+        ));
+    }
     let tau = run.tau;
     let outside = opts.outside.clone().unwrap_or_else(|| scanned_from(&headers));
     let Some((batches, counts, seconds)) = run.curves(&r, &outside)? else {
@@ -774,11 +782,16 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
         finished: false,
         work_dir,
         cleaned: false,
+        kept: None,
+        far_points: 0,
         workers: worker.map(|w| w.count),
     };
     manifest::save(ws, &m)?;
     Ok((m, false))
 }
+
+/// Most bucketing rounds: each leaves out the far points that the previous grid showed.
+const FAR_ROUNDS: u32 = 4;
 
 /// The top-level names of a run's working data: the tile store and the per-tile results.
 const WORKING: [&str; 8] =
@@ -952,25 +965,53 @@ impl<'a> Run<'a> {
         Ok(Some(r))
     }
 
-    /// Bucketing: all or nothing (a partial store is discarded on resume).
+    /// Bucketing: all or nothing (a partial store is discarded on resume). Where the points
+    /// turn out to have far points, the grid is planned again over the rest and they are
+    /// bucketed again without them (a few rounds at most: a far point inside the first
+    /// grid's bins of the rest shows in the next).
     fn bucket(&mut self, input: &Input) -> Result<()> {
         if self.manifest.bucketed {
             return Ok(());
         }
         let t = Instant::now();
-        let store = Store::new(&self.ws)?;
-        store.clear()?;
-        let mut b = Bucketer::new(&self.manifest.grid, store, (self.opts.memory / 4 / 48) as usize);
-        let bar = self.progress.bar("bucketing", self.manifest.declared_points, "points");
-        bucket::bucket(input, &mut b, &bar, &self.opts.cancel)?;
-        b.flush()?;
-        store.sync()?;
-        bar.finish();
-        self.manifest.tile_points = b.counts.clone();
+        for round in 1.. {
+            let store = Store::new(&self.ws)?;
+            store.clear()?;
+            let grid = self.manifest.grid.clone();
+            let tiles = Bucketer::new(&grid, store, (self.opts.memory / 4 / 48) as usize);
+            let mut sink = bucket::Sink { tiles, spread: far::Spread::new(&grid.span()), kept: self.manifest.kept, far: 0 };
+            let bar = self.progress.bar("bucketing", self.manifest.declared_points, "points");
+            bucket::bucket(input, &mut sink, &bar, &self.opts.cancel)?;
+            bar.finish();
+            match sink.spread.far_bounds() {
+                Some(kept) if round < FAR_ROUNDS => {
+                    drop(sink);
+                    self.replan(kept)?;
+                }
+                _ => {
+                    sink.tiles.flush()?;
+                    store.sync()?;
+                    self.manifest.tile_points = sink.tiles.counts.clone();
+                    self.manifest.far_points = sink.far;
+                    break;
+                }
+            }
+        }
         self.manifest.bucketed = true;
         manifest::save(&self.ws, &self.manifest)?;
         self.pass.bucketing = t.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// Plans the grid again over `kept`, the bounds of the points that are not far.
+    fn replan(&mut self, kept: Bounds) -> Result<()> {
+        let m = &mut self.manifest;
+        let size = self.opts.tile_size.unwrap_or_else(|| tile_size_for(&kept, m.declared_points, self.opts.memory));
+        m.grid = Grid::new(&kept, size);
+        m.diag = kept.diagonal();
+        m.kept = Some(kept);
+        self.kq = key_quantum(m.diag);
+        manifest::save(&self.ws, &self.manifest)
     }
 
     /// Statistics pass: spacing, noise and density at sampled points, with a first halo wide
