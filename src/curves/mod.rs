@@ -15,6 +15,9 @@
 //!   `free` or `closed`), `corners` (indices of corner vertices, as text). The CRS is named with
 //!   the `crs` member, which GDAL reads: the EPSG URN, or the WKT when the CRS has no code; the
 //!   full WKT is also in `crs_wkt`, the units in `crs_units`. Without a CRS, GDAL assumes WGS 84.
+//!   Also `kind`, what the curve is as typed pieces ([`typed`]): `line`, `arc`, `circle` or
+//!   `polyline` where all its pieces are of that kind, `mixed` where they differ; and `radius`,
+//!   where it is one arc or one circle (else null).
 //! - `curves.gpkg`: an OGC GeoPackage, a `curves` table of LineString Z features with the same
 //!   scalar attributes as the GeoJSON, and the CRS (code and WKT) in its spatial reference table.
 //! - `curves.dxf` (AutoCAD 2000): each curve a 3D polyline on layer `crease_curves`, in curve id
@@ -23,6 +26,7 @@
 //!   value (`id` 1071, `closed` 1070, `length`, `confidence`, `angle` 1040, `shape`, `start`,
 //!   `end`, `corners` 1000); GDAL lists them as `RawCodeValues` with `--config
 //!   DXF_INCLUDE_RAW_CODE_VALUES TRUE`. No CRS (DXF has none).
+//! - `curves.json`: the typed pieces, one record each ([`typed::write_pieces`]).
 //!
 //! A curve's `angle` is the mean dihedral angle of its crease in degrees: the wedge the two
 //! surfaces enclose, 90 at a cube's edge, 135 where a chamfer meets a face, towards 180 as the
@@ -100,8 +104,8 @@ impl Format {
         match self {
             Format::Obj => write_obj(path, curves, crs),
             Format::Ply => write_ply(path, curves, crs),
-            Format::Geojson => write_geojson(path, curves, crs),
-            Format::Gpkg => write_gpkg(path, curves, crs),
+            Format::Geojson => write_geojson(path, curves, crs, tolerance),
+            Format::Gpkg => write_gpkg(path, curves, crs, tolerance),
             Format::Dxf => write_dxf(path, curves, crs),
             Format::Json => typed::write_pieces(path, curves, crs, tolerance),
         }
