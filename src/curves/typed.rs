@@ -272,20 +272,15 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
         }
     };
     while i + 1 < m {
-        let mut jl = i + 1;
-        while jl + 1 < m && line_error(&pts[i..=jl + 1]) <= tol {
-            jl += 1;
-        }
+        let jl = farthest(i + 1, m - 1, |j| line_error(&pts[i..=j]) <= tol);
         // (An arc is taken only where it reaches farther than the line: none can where the
         // line reaches the run's end.)
-        let mut arc = None;
-        let mut ja = if jl + 1 < m { i + 3 } else { m };
-        while ja < m
-            && let Some(fit) = arc_fit(&pts[i..=ja], tol)
-        {
-            arc = Some((ja, fit));
-            ja += 1;
-        }
+        let arc = if jl + 1 < m && i + 3 < m && arc_fit(&pts[i..=i + 3], tol).is_some() {
+            let ja = farthest(i + 3, m - 1, |j| arc_fit(&pts[i..=j], tol).is_some());
+            arc_fit(&pts[i..=ja], tol).map(|fit| (ja, fit))
+        } else {
+            None
+        };
         // (An arc that bows out from its chord by no more than twice the tolerance cannot be
         // told from a line at that tolerance: the line, the simpler type, is taken.)
         let bows = |r: f64, sweep: f64| r * (1.0 - (0.5 * sweep.min(std::f64::consts::PI)).cos()) > 2.0 * tol;
@@ -314,6 +309,32 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
         }
     }
     flush(&mut loose, m - 1, out);
+}
+
+/// The largest `j` in `lo..=hi` for which `ok(j)` holds, given that it holds at `lo`: found by
+/// steps that double until one fails, then halve (a piece grown a vertex at a time took time
+/// quadratic in its length). Where a fit fails
+/// at one vertex and holds again farther on, the piece may reach past that vertex: it still
+/// holds within the tolerance over all it spans, as that is what `ok` checks.
+fn farthest(lo: usize, hi: usize, ok: impl Fn(usize) -> bool) -> usize {
+    let (mut good, mut bad, mut step) = (lo, hi + 1, 1);
+    while good + step < bad {
+        if ok(good + step) {
+            good += step;
+            step *= 2;
+        } else {
+            bad = good + step;
+        }
+    }
+    while bad - good > 1 {
+        let mid = good + (bad - good) / 2;
+        if ok(mid) {
+            good = mid;
+        } else {
+            bad = mid;
+        }
+    }
+    good
 }
 
 /// The tolerance of the typed pieces of a run: three noise deviations, or half the spacing on a
