@@ -4,7 +4,12 @@
 //! the full WKT in a `crs_wkt` member when the input carries one, and the units in `crs_units`
 //! (GDAL reads the `crs` member only: its name is the EPSG URN, or the WKT when there is no
 //! code).
+//!
+//! Each feature also names what its curve is as typed pieces (see [`super::typed`]): its `kind`
+//! and, for one arc or circle, its `radius`; the geometry stays the curve's own vertices, so
+//! that a GIS reads every curve whatever its kind.
 
+use super::typed;
 use super::Curves;
 use crate::error::{Error, Result};
 use crate::points::Crs;
@@ -12,8 +17,9 @@ use serde_json::{json, Value};
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-/// Writes `curves` to `path` as a GeoJSON FeatureCollection.
-pub fn write_geojson(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Result<()> {
+/// Writes `curves` to `path` as a GeoJSON FeatureCollection (`tol`: the tolerance of the typed
+/// pieces that name each curve's kind, see [`typed::tolerance`]).
+pub fn write_geojson(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);
     let mut head = serde_json::Map::new();
@@ -48,12 +54,14 @@ pub fn write_geojson(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) ->
             coords.push(coords[0]);
         }
         let [start, end] = c.end_kinds();
+        let (kind, radius) = typed::curve_kind(&typed::pieces(c, tol));
         // (Scalar properties only: Shapefile and FlatGeobuf drop or refuse lists.)
         let feature = json!({
             "type": "Feature",
             "properties": {
                 "id": c.id, "closed": c.closed, "length": c.length(), "confidence": c.confidence,
                 "angle": c.mean_dihedral_angle(), "shape": c.shape.name(), "start": start, "end": end, "corners": c.corner_list(),
+                "kind": kind, "radius": radius,
             },
             "geometry": {"type": "LineString", "coordinates": coords},
         });

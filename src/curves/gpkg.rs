@@ -1,8 +1,10 @@
 //! GeoPackage 1.3 output (OGC 12-128r18): one `curves` feature table of LineString Z geometries
 //! with the per-curve attributes as columns, and the CRS in the spatial reference table, so
-//! GIS tools place the curves without a sidecar. Written with SQLite (rusqlite, bundled).
+//! GIS tools place the curves without a sidecar. Written with SQLite (rusqlite, bundled). Its
+//! `kind` and `radius` columns say what each curve is as typed pieces (see [`super::typed`]);
+//! the geometry stays the curve's own vertices.
 
-use super::{Curves, Polyline};
+use super::{typed, Curves, Polyline};
 use crate::crs::Crs;
 use crate::error::{Error, Result};
 use rusqlite::{params, Connection};
@@ -46,8 +48,9 @@ fn geometry(c: &Polyline, srs: i64) -> Vec<u8> {
     g
 }
 
-/// Writes `curves` to `path` as a GeoPackage (replacing any file there).
-pub fn write_gpkg(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Result<()> {
+/// Writes `curves` to `path` as a GeoPackage (replacing any file there; `tol`: the tolerance of
+/// the typed pieces that name each curve's kind, see [`typed::tolerance`]).
+pub fn write_gpkg(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
     let _ = std::fs::remove_file(path);
     let out = |e: rusqlite::Error| Error::output(path, std::io::Error::other(e.to_string()));
     let mut db = Connection::open(path).map_err(out)?;
@@ -65,7 +68,8 @@ pub fn write_gpkg(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Re
          INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined cartesian SRS', -1, 'NONE', -1, 'undefined', 'undefined cartesian coordinate reference system');
          INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined geographic SRS', 0, 'NONE', 0, 'undefined', 'undefined geographic coordinate reference system');
          CREATE TABLE curves (fid INTEGER PRIMARY KEY AUTOINCREMENT, geom LINESTRINGZ, id INTEGER, closed BOOLEAN, length DOUBLE,
-           confidence DOUBLE, angle DOUBLE, shape TEXT, start TEXT, \"end\" TEXT, corners TEXT);",
+           confidence DOUBLE, angle DOUBLE, shape TEXT, start TEXT, \"end\" TEXT, corners TEXT,
+           kind TEXT, radius DOUBLE);",
     )
     .map_err(out)?;
     if srs > 0 {
@@ -92,10 +96,11 @@ pub fn write_gpkg(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Re
     tx.execute("INSERT INTO gpkg_geometry_columns VALUES ('curves', 'geom', 'LINESTRING', ?1, 1, 0)", params![srs]).map_err(out)?;
     {
         let mut insert = tx
-            .prepare("INSERT INTO curves (geom, id, closed, length, confidence, angle, shape, start, \"end\", corners) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)")
+            .prepare("INSERT INTO curves (geom, id, closed, length, confidence, angle, shape, start, \"end\", corners, kind, radius) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)")
             .map_err(out)?;
         curves.each(&mut |c| {
             let [start, end] = c.end_kinds();
+            let (kind, radius) = typed::curve_kind(&typed::pieces(c, tol));
             insert
                 .execute(params![
                     geometry(c, srs),
@@ -107,7 +112,9 @@ pub fn write_gpkg(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs) -> Re
                     c.shape.name(),
                     start,
                     end,
-                    c.corner_list()
+                    c.corner_list(),
+                    kind,
+                    radius
                 ])
                 .map_err(out)?;
             Ok(())

@@ -15,14 +15,21 @@
 //!   `free` or `closed`), `corners` (indices of corner vertices, as text). The CRS is named with
 //!   the `crs` member, which GDAL reads: the EPSG URN, or the WKT when the CRS has no code; the
 //!   full WKT is also in `crs_wkt`, the units in `crs_units`. Without a CRS, GDAL assumes WGS 84.
+//!   Also `kind`, what the curve is as typed pieces ([`typed`]): `line`, `arc`, `circle` or
+//!   `polyline` where all its pieces are of that kind, `mixed` where they differ; and `radius`,
+//!   where it is one arc or one circle (else null).
 //! - `curves.gpkg`: an OGC GeoPackage, a `curves` table of LineString Z features with the same
 //!   scalar attributes as the GeoJSON, and the CRS (code and WKT) in its spatial reference table.
-//! - `curves.dxf` (AutoCAD 2000): each curve a 3D polyline on layer `crease_curves`, in curve id
-//!   order, each corner a point on layer `crease_corners`. Each polyline carries the curve's
-//!   attributes as extended data of the application `CREASE`: a name (group code 1000) then its
-//!   value (`id` 1071, `closed` 1070, `length`, `confidence`, `angle` 1040, `shape`, `start`,
-//!   `end`, `corners` 1000); GDAL lists them as `RawCodeValues` with `--config
+//! - `curves.dxf` (AutoCAD 2000): each curve as its typed pieces, in curve id order: a LINE on
+//!   layer `crease_lines`, an ARC on `crease_arcs`, a CIRCLE on `crease_circles` (an arc's or a
+//!   circle's axis its extrusion direction), a run no line or arc fits a 3D POLYLINE on
+//!   `crease_curves`; each corner a POINT on layer `crease_corners`. Each entity carries its
+//!   curve's attributes as extended data of the application `CREASE`: a name (group code 1000)
+//!   then its value (`id` 1071, `closed` 1070, `length`, `confidence`, `angle` 1040, `shape`,
+//!   `start`, `end`, `corners` 1000), then the piece's `kind` (1000) and an arc's or a circle's
+//!   `radius` (1040); GDAL lists them as `RawCodeValues` with `--config
 //!   DXF_INCLUDE_RAW_CODE_VALUES TRUE`. No CRS (DXF has none).
+//! - `curves.json`: the typed pieces, one record each ([`typed::write_pieces`]).
 //!
 //! A curve's `angle` is the mean dihedral angle of its crease in degrees: the wedge the two
 //! surfaces enclose, 90 at a cube's edge, 135 where a chamfer meets a face, towards 180 as the
@@ -70,7 +77,7 @@ pub enum Format {
     Geojson,
     /// OGC GeoPackage (`curves.gpkg`).
     Gpkg,
-    /// DXF 3D polylines for CAD (`curves.dxf`).
+    /// DXF lines, arcs, circles and 3D polylines for CAD (`curves.dxf`).
     Dxf,
     /// The curves as typed pieces, lines, arcs, circles and polyline runs (`curves.json`).
     Json,
@@ -100,9 +107,9 @@ impl Format {
         match self {
             Format::Obj => write_obj(path, curves, crs),
             Format::Ply => write_ply(path, curves, crs),
-            Format::Geojson => write_geojson(path, curves, crs),
-            Format::Gpkg => write_gpkg(path, curves, crs),
-            Format::Dxf => write_dxf(path, curves, crs),
+            Format::Geojson => write_geojson(path, curves, crs, tolerance),
+            Format::Gpkg => write_gpkg(path, curves, crs, tolerance),
+            Format::Dxf => write_dxf(path, curves, crs, tolerance),
             Format::Json => typed::write_pieces(path, curves, crs, tolerance),
         }
     }

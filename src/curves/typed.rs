@@ -42,6 +42,30 @@ pub enum Kind {
     Polyline,
 }
 
+impl Kind {
+    /// Its name in the outputs: `line`, `arc`, `circle` or `polyline`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Line => "line",
+            Kind::Arc => "arc",
+            Kind::Circle => "circle",
+            Kind::Polyline => "polyline",
+        }
+    }
+}
+
+/// What a whole curve is, from its pieces (see [`pieces`]): the name of the kind they all
+/// share (`polyline` for a curve without pieces), `mixed` where they differ; and the radius
+/// where the curve is one arc or one circle.
+pub fn curve_kind(pieces: &[Piece]) -> (&'static str, Option<f64>) {
+    let Some(first) = pieces.first() else { return (Kind::Polyline.name(), None) };
+    if pieces.iter().any(|p| p.kind != first.kind) {
+        return ("mixed", None);
+    }
+    let radius = if pieces.len() == 1 { first.radius } else { None };
+    (first.kind.name(), radius)
+}
+
 /// One piece of a typed curve.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Piece {
@@ -248,20 +272,15 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
         }
     };
     while i + 1 < m {
-        let mut jl = i + 1;
-        while jl + 1 < m && line_error(&pts[i..=jl + 1]) <= tol {
-            jl += 1;
-        }
+        let jl = farthest(i + 1, m - 1, |j| line_error(&pts[i..=j]) <= tol);
         // (An arc is taken only where it reaches farther than the line: none can where the
         // line reaches the run's end.)
-        let mut arc = None;
-        let mut ja = if jl + 1 < m { i + 3 } else { m };
-        while ja < m
-            && let Some(fit) = arc_fit(&pts[i..=ja], tol)
-        {
-            arc = Some((ja, fit));
-            ja += 1;
-        }
+        let arc = if jl + 1 < m && i + 3 < m && arc_fit(&pts[i..=i + 3], tol).is_some() {
+            let ja = farthest(i + 3, m - 1, |j| arc_fit(&pts[i..=j], tol).is_some());
+            arc_fit(&pts[i..=ja], tol).map(|fit| (ja, fit))
+        } else {
+            None
+        };
         // (An arc that bows out from its chord by no more than twice the tolerance cannot be
         // told from a line at that tolerance: the line, the simpler type, is taken.)
         let bows = |r: f64, sweep: f64| r * (1.0 - (0.5 * sweep.min(std::f64::consts::PI)).cos()) > 2.0 * tol;
@@ -290,6 +309,32 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
         }
     }
     flush(&mut loose, m - 1, out);
+}
+
+/// The largest `j` in `lo..=hi` for which `ok(j)` holds, given that it holds at `lo`: found by
+/// steps that double until one fails, then halve (a piece grown a vertex at a time took time
+/// quadratic in its length). Where a fit fails
+/// at one vertex and holds again farther on, the piece may reach past that vertex: it still
+/// holds within the tolerance over all it spans, as that is what `ok` checks.
+fn farthest(lo: usize, hi: usize, ok: impl Fn(usize) -> bool) -> usize {
+    let (mut good, mut bad, mut step) = (lo, hi + 1, 1);
+    while good + step < bad {
+        if ok(good + step) {
+            good += step;
+            step *= 2;
+        } else {
+            bad = good + step;
+        }
+    }
+    while bad - good > 1 {
+        let mid = good + (bad - good) / 2;
+        if ok(mid) {
+            good = mid;
+        } else {
+            bad = mid;
+        }
+    }
+    good
 }
 
 /// The tolerance of the typed pieces of a run: three noise deviations, or half the spacing on a
@@ -449,6 +494,32 @@ mod tests {
             assert!(sq.contains(&p.start));
         }
         check(&pl, &pieces, 1e-9);
+    }
+
+    #[test]
+    fn a_curve_is_of_the_kind_its_pieces_share_with_the_radius_of_its_one_arc_or_circle() {
+        let rim: Vec<DVec3> = (0..60).map(|k| k as f64 * TAU / 60.0).map(|t| DVec3::new(2.0 * t.cos(), 2.0 * t.sin(), 0.0)).collect();
+        let (kind, r) = curve_kind(&pieces(&polyline(rim.clone(), true), 1e-6));
+        assert_eq!(kind, "circle");
+        assert!((r.unwrap() - 2.0).abs() < 1e-12);
+        let (kind, r) = curve_kind(&pieces(&polyline(rim[..20].to_vec(), false), 1e-6));
+        assert_eq!(kind, "arc");
+        assert!((r.unwrap() - 2.0).abs() < 1e-12);
+        // A square's four sides: all lines, so a line curve, but not one radius.
+        let sq = [DVec3::ZERO, DVec3::X, DVec3::X + DVec3::Y, DVec3::Y];
+        let mut square = polyline((0..40).map(|k| sq[k / 10].lerp(sq[(k / 10 + 1) % 4], (k % 10) as f64 / 10.0)), true);
+        for k in [0, 10, 20, 30] {
+            square.vertices[k].corner = true;
+        }
+        assert_eq!(curve_kind(&pieces(&square, 1e-9)), ("line", None));
+        // A side and a quarter circle meeting at a corner: mixed.
+        let mut bend = polyline((0..=10).map(|k| DVec3::new(k as f64 / 10.0 - 1.0, 0.0, 0.0)), false);
+        bend.vertices.extend((1..=15).map(|k| k as f64 * TAU / 60.0).map(|t| Vertex::at(DVec3::new(t.sin(), 1.0 - t.cos(), 0.0))));
+        bend.vertices[10].corner = true;
+        let p = pieces(&bend, 1e-6);
+        assert_eq!(p.iter().map(|p| p.kind).collect::<Vec<_>>(), [Kind::Line, Kind::Arc]);
+        assert_eq!(curve_kind(&p), ("mixed", None));
+        assert_eq!(curve_kind(&[]), ("polyline", None));
     }
 
     #[test]

@@ -78,46 +78,48 @@ fn a_wkt_in_a_later_evlr_names_every_output() {
     }
     assert!(rows.iter().any(|(_, c)| !c.is_empty()), "cube edges end at corners");
 
-    // DXF: each curve a 3D polyline on its layer, carrying its attributes as extended data;
-    // each corner a point on another layer.
+    // DXF: each cube edge a LINE on its layer between two corners, carrying its curve's
+    // attributes as extended data; each corner a point on another layer.
     let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q", "--format", "dxf"]);
     assert_eq!(code, 0, "{err}");
     assert!(!run.join("curves.gpkg").exists());
     let drawing = dxf::Drawing::load_file(run.join("curves.dxf")).unwrap();
-    let (mut lines, mut corners) = (0, 0);
+    let (mut lines, mut corners) = (vec![], vec![]);
+    let at = |p: &dxf::Point| glam::DVec3::new(p.x, p.y, p.z);
     for e in drawing.entities() {
         match &e.specific {
-            dxf::entities::EntityType::Polyline(p) => {
-                assert!(p.is_3d_polyline() && e.common.layer == "crease_curves");
-                assert!(p.vertices().count() >= 2);
-                assert_eq!(e.common.x_data.len(), 1, "curve {lines}: one block of extended data, on the polyline");
+            dxf::entities::EntityType::Line(l) => {
+                let n = lines.len();
+                assert_eq!(e.common.layer, "crease_lines");
+                assert_eq!(e.common.x_data.len(), 1, "curve {n}: one block of extended data");
                 let x = &e.common.x_data[0];
                 assert_eq!(x.application_name, "CREASE");
-                let value = |name: &str| {
-                    let k = x.items.iter().position(|i| *i == dxf::XDataItem::Str(name.into())).unwrap_or_else(|| panic!("curve {lines}: no {name}"));
-                    x.items[k + 1].clone()
-                };
-                assert_eq!(value("id"), dxf::XDataItem::Long(lines));
-                let v: Vec<glam::DVec3> = p.vertices().map(|v| glam::DVec3::new(v.location.x, v.location.y, v.location.z)).collect();
-                let length: f64 = v.windows(2).map(|w| w[0].distance(w[1])).sum::<f64>() + if p.is_closed() { v[v.len() - 1].distance(v[0]) } else { 0.0 };
-                let dxf::XDataItem::Real(stated) = value("length") else { panic!("curve {lines}: length is not a real") };
-                assert!((stated - length).abs() < 1e-9 * length, "curve {lines}: length {stated}, vertices {length}");
-                let dxf::XDataItem::Real(angle) = value("angle") else { panic!("curve {lines}: angle is not a real") };
-                assert!((angle - 90.0).abs() < 5.0, "curve {lines}: a cube edge at {angle} degrees");
+                let value = |name: &str| x.items.iter().position(|i| *i == dxf::XDataItem::Str(name.into())).map(|k| x.items[k + 1].clone());
+                let value = |name: &str| value(name).unwrap_or_else(|| panic!("curve {n}: no {name}"));
+                assert_eq!(value("id"), dxf::XDataItem::Long(n as i32));
+                assert_eq!(value("kind"), dxf::XDataItem::Str("line".into()));
+                assert!(x.items.iter().all(|i| *i != dxf::XDataItem::Str("radius".into())), "curve {n}: a line has no radius");
+                // The curve's length: its vertices', a little over the straight line's.
+                let chord = at(&l.p1).distance(at(&l.p2));
+                let dxf::XDataItem::Real(length) = value("length") else { panic!("curve {n}: length is not a real") };
+                assert!(length >= chord * (1.0 - 1e-9) && length < 1.01 * chord, "curve {n}: length {length}, line {chord}");
+                let dxf::XDataItem::Real(angle) = value("angle") else { panic!("curve {n}: angle is not a real") };
+                assert!((angle - 90.0).abs() < 5.0, "curve {n}: a cube edge at {angle} degrees");
                 // (No scanner position is known for a LAS file unless given.)
                 assert_eq!(value("shape"), dxf::XDataItem::Str("unknown".into()));
                 assert_eq!((value("start"), value("end")), (dxf::XDataItem::Str("corner".into()), dxf::XDataItem::Str("corner".into())));
-                lines += 1;
+                lines.push([at(&l.p1), at(&l.p2)]);
             }
-            dxf::entities::EntityType::Seqend(_) => assert!(e.common.x_data.is_empty(), "extended data left on a SEQEND"),
-            dxf::entities::EntityType::ModelPoint(_) => {
+            dxf::entities::EntityType::ModelPoint(p) => {
                 assert_eq!(e.common.layer, "crease_corners");
-                corners += 1;
+                corners.push(at(&p.location));
             }
-            _ => {}
+            other => panic!("a cube's curves are lines: {other:?}"),
         }
     }
-    assert_eq!((lines, corners), (12, 8));
+    assert_eq!((lines.len(), corners.len()), (12, 8));
+    // Every line runs between two corners.
+    assert!(lines.iter().flatten().all(|p| corners.contains(p)), "{lines:?} {corners:?}");
 
     // --a-srs: the outputs carry the assigned CRS, and the replaced one is named in a warning.
     let (code, err) = crease(&["extract", cloud.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q", "--a-srs", "EPSG:4258"]);

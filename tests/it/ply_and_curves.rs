@@ -144,7 +144,7 @@ fn geojson_carries_crs_and_coordinates() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path().join("c.geojson");
     let crs = crease::points::Crs { wkt: Some("PROJCS[\"x\"]".into()), epsg: Some(2154), ..Default::default() };
-    write_geojson(&p, &sample_curves(), &crs).unwrap();
+    write_geojson(&p, &sample_curves(), &crs, 1e-6).unwrap();
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     assert_eq!(v["crs"]["properties"]["name"], "urn:ogc:def:crs:EPSG::2154");
     assert_eq!(v["features"].as_array().unwrap().len(), 2);
@@ -159,12 +159,15 @@ fn geojson_carries_crs_and_coordinates() {
     assert_eq!((b["start"].as_str(), b["end"].as_str()), (Some("closed"), Some("closed")));
     assert!((b["angle"].as_f64().unwrap() - 90.0).abs() < 1e-4, "{b}");
     assert_eq!((a["shape"].as_str(), b["shape"].as_str()), (Some("convex"), Some("unknown")));
+    // Neither curve has a step that a line or an arc reaches beyond.
+    assert_eq!((a["kind"].as_str(), b["kind"].as_str()), (Some("polyline"), Some("polyline")));
+    assert!(a["radius"].is_null() && b["radius"].is_null());
     for f in v["features"].as_array().unwrap() {
         assert!(f["properties"].as_object().unwrap().values().all(|p| !p.is_array() && !p.is_object()), "{f}");
     }
     // Without an EPSG code, the `crs` member's name is the WKT, which GDAL reads as the CRS.
     let wkt_only = crease::points::Crs { wkt: Some("PROJCS[\"NAD83_2011_Nebraska_ft\"]".into()), ..Default::default() };
-    write_geojson(&p, &sample_curves(), &wkt_only).unwrap();
+    write_geojson(&p, &sample_curves(), &wkt_only, 1e-6).unwrap();
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     assert_eq!(v["crs"]["properties"]["name"], "PROJCS[\"NAD83_2011_Nebraska_ft\"]");
 }
