@@ -23,6 +23,11 @@ pub struct Crs {
     pub vertical_unit: Option<String>,
 }
 
+/// The range the EPSG dataset's codes lie in (it reserves 1 to 32767, and its coordinate
+/// reference systems start at 1024): a code outside it is a typing slip or another
+/// authority's (ESRI's 102100), which a reader would take for an EPSG code that does not exist.
+pub const EPSG_CODES: std::ops::RangeInclusive<u32> = 1024..=32767;
+
 impl Crs {
     /// True if nothing is known of the CRS.
     pub fn is_unknown(&self) -> bool {
@@ -104,11 +109,19 @@ impl Crs {
     /// use crease::crs::Crs;
     /// assert_eq!(Crs::parse_user("EPSG:32610").unwrap().epsg, Some(32610));
     /// assert!(Crs::parse_user("UTM 10").is_err());
+    /// assert!(Crs::parse_user("EPSG:99999999").is_err());
     /// ```
     pub fn parse_user(s: &str) -> Result<Crs> {
         let s = s.trim();
         if let Some(code) = s.strip_prefix("EPSG:").or_else(|| s.strip_prefix("epsg:")) {
             let epsg = code.parse::<u32>().map_err(|_| Error::Usage(format!("--a-srs: '{code}' is not an EPSG code")))?;
+            if !EPSG_CODES.contains(&epsg) {
+                return Err(Error::Usage(format!(
+                    "--a-srs: EPSG:{epsg} is outside the codes of the EPSG dataset ({} to {}); give another authority's CRS as a WKT",
+                    EPSG_CODES.start(),
+                    EPSG_CODES.end()
+                )));
+            }
             return Ok(Crs { epsg: Some(epsg), ..Default::default() });
         }
         match Node::parse(s) {

@@ -134,3 +134,18 @@ fn method_parameters_that_are_not_positive_are_refused() {
         assert!(!out.exists(), "{option} {value}: the run directory was created");
     }
 }
+
+/// An EPSG code outside the EPSG dataset's range (a typing slip, or ESRI's 102100) is refused
+/// before anything is written: a reader would take it for a CRS that does not exist.
+#[test]
+fn epsg_codes_outside_the_dataset_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let cube = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las");
+    let out = d.path().join("run");
+    for code in ["EPSG:99999999", "EPSG:102100", "EPSG:0"] {
+        let (status, err) = run(&["extract", cube.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q", "--a-srs", code]);
+        assert_eq!(status, Some(crease::error::exit::USAGE), "{code}: {err}");
+        assert!(err.contains(&format!("{code} is outside the codes of the EPSG dataset")), "{code}: {err}");
+        assert!(!out.exists(), "{code}: the run directory was created");
+    }
+}
