@@ -145,6 +145,20 @@ pub const AVERAGE_NOISE: f64 = 2.0;
 pub const AVERAGE_POINTS: f64 = 48.0;
 
 impl Resolved {
+    /// True if every length is finite and positive (the noise lengths not negative), every
+    /// share in (0, 1] and every angle within its range: what the statistics pass gives. A
+    /// manifest edited by hand (a step of -1) gave 0 curves and exit 0.
+    pub fn is_sane(&self) -> bool {
+        let positive = [self.kappa, self.scale, self.fit_radius, self.rmls_radius, self.min_threshold, self.step, self.corner_radius, self.reach_steps];
+        let not_negative = [self.noise, self.surface_noise, self.average];
+        let shares = [self.keep, self.evaluate, self.average_share, self.linearity];
+        let angles = [self.max_turn_deg, self.min_angle_deg, self.aperture_deg];
+        positive.iter().all(|&x| x.is_finite() && x > 0.0)
+            && not_negative.iter().all(|&x| x.is_finite() && x >= 0.0)
+            && shares.iter().all(|&x| x > 0.0 && x <= 1.0)
+            && angles.iter().all(|&x| x.is_finite() && (0.0..=180.0).contains(&x))
+    }
+
     /// The halo a tile needs around its core for stages 1-2: the widest neighbourhood they
     /// read, with a margin. Sparse neighbourhoods are widened no farther, so that every
     /// point's neighbourhood is the same in any tiling.

@@ -736,6 +736,12 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
             if !sane {
                 return Err(Error::damaged(ws.path(manifest::NAME), "its tile grid is not one crease planned"));
             }
+            if m.resolved.as_ref().is_some_and(|r| !r.is_sane()) {
+                return Err(Error::damaged(
+                    ws.path(manifest::NAME),
+                    "its resolved parameters are not ones the statistics pass gives (a length not positive, a share or an angle out of range)",
+                ));
+            }
             return Ok((m, true));
         }
         Some(m) => {

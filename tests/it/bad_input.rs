@@ -188,9 +188,10 @@ fn shared(name: &str) -> PathBuf {
 
 /// A tile size that would make more tiles than crease handles is refused at once (it once
 /// looped for minutes over a million empty tiles, or overflowed the tile count), and so is a
-/// manifest whose grid was edited to such a size.
+/// manifest whose grid was edited to such a size, or whose resolved parameters were edited out
+/// of range.
 #[test]
-fn too_many_tiles_and_an_edited_grid_are_refused() {
+fn too_many_tiles_and_an_edited_grid_or_parameters_are_refused() {
     let d = tmp();
     let las = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las");
     let out = d.path().join("run");
@@ -210,6 +211,18 @@ fn too_many_tiles_and_an_edited_grid_are_refused() {
     let (code, _, err) = run("0.5");
     assert_eq!(code, exit::DATA, "{err}");
     assert!(err.contains("manifest.json: damaged run directory file"), "{err}");
+    // Resolved parameters edited out of range (they gave 0 curves and exit 0).
+    std::fs::write(&manifest, &text).unwrap();
+    for (key, value) in [("step", serde_json::json!(-1.0)), ("keep", serde_json::json!(0.0)), ("min_angle_deg", serde_json::json!(400.0))] {
+        let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+        m["resolved"][key] = value;
+        std::fs::write(&manifest, m.to_string()).unwrap();
+        let (code, _, err) = run("0.5");
+        assert_eq!(code, exit::DATA, "{key}: {err}");
+        assert!(err.contains("manifest.json: damaged run directory file") && err.contains("resolved parameters"), "{key}: {err}");
+    }
+    std::fs::write(&manifest, &text).unwrap();
+    assert_eq!(run("0.5").0, 0);
 }
 
 /// A FIFO named like a point file is refused rather than read forever, and a cloud whose
