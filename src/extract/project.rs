@@ -1,20 +1,29 @@
 //! Stage 2: robust projection of candidates onto feature curves (Daniels 2007 section 3.3,
 //! 2008 section 3.3), after the robust MLS of Fleishman et al. 2005.
 //!
-//! The neighbourhood of a candidate is split into smooth, outlier-free sub-neighbourhoods by a
-//! forward search: seeds are small local patches; the patch whose plane has the smallest
-//! low-quantile residual over the remaining points wins (least quantile of squares, which stays
-//! robust when no surface holds half the points, as at corners); it grows to every point within
-//! a noise-scaled threshold, is refined, and is fitted with a quadratic. Its points are removed
+//! A neighbourhood is split into smooth, outlier-free sub-neighbourhoods by a forward search:
+//! seeds are small local patches; the patch whose plane has the smallest low-quantile residual
+//! over the remaining points wins (least quantile of squares, which stays robust when no
+//! surface holds half the points, as at corners); it grows to every point within a
+//! noise-scaled threshold, is refined, and is fitted with a quadratic. Its points are removed
 //! and the search repeats. One surface: the candidate is an outlier and is dropped. Two or more:
 //! the candidate is Newton-projected onto the intersection of the two surfaces nearest to it
 //! (an edge point keeping both normals); with three or more, a corner point is also solved.
 //! Projections that move farther than the neighbourhood radius are culled (2008).
+//!
+//! The search runs over each candidate's own ball ([`Model::Balls`], the default), or is shared
+//! ([`Model::Cells`]): candidates are grouped in cells a quarter of the neighbourhood radius
+//! wide (see [`CELL_SHARE`]), and one search over the ball around each cell's centre gives the
+//! surfaces that all its candidates are projected onto. Noise widens the band of candidates
+//! along a feature, not the number of cells it crosses, so the cost of the shared search grows
+//! with the length of the features rather than with the candidates; but one search decides
+//! for a cell's candidates together, and its errors do not average out over them.
 
 use super::fit::{project_to_corner, project_to_intersection, Frame, Pca, Quadric};
 use super::neighbourhood::{Cloud, Neighbourhood};
+use super::params::Model;
 use super::params::Resolved;
-use crate::keys::position_key;
+use crate::keys::{position_key, snap_quantum};
 use crate::rng::Rng;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -56,6 +65,11 @@ pub struct ProjectParams {
     pub noise: f64,
     /// Largest RMS of a surface that meets another at an edge point (see [`SURFACE_NOISE`]).
     pub max_rms: f64,
+    /// Quantum of the point keys: candidates are put in cells by their position on this grid,
+    /// which does not depend on where a tile's origin lies.
+    pub key_quantum: f64,
+    /// How the surfaces are searched for.
+    pub model: Model,
 }
 
 /// What projection made of one candidate.
@@ -89,6 +103,12 @@ pub struct Projected {
 /// instead of 150 gained a little more at 0.01 dB but tripled the time of the 0.005 dB rows,
 /// to 10-14 s.)
 const MAX_NEIGHBOURS: usize = 700;
+/// Side of the cells whose candidates share one forward search, as a share of the projection
+/// radius: a cell's centre lies within 0.22 radii of each of its candidates, so its
+/// ball holds most of theirs, and lies within the halo (1.25 radii) wherever they lie in the
+/// tile's core. The search's cost then grows with the length of the features, not with the
+/// candidates, whose band noise widens.
+const CELL_SHARE: f64 = 0.25;
 /// Fewest neighbours one robust fit looks at (sparse regions widen the ball).
 const MIN_NEIGHBOURS: usize = 40;
 /// Seeds tried per surface.
@@ -218,10 +238,6 @@ pub struct TileEdges {
 /// Stage 2 for one tile: projects the `candidates` (indices into the tile's `cloud`) with the
 /// parameters `r`. Returns edge and corner points in world coordinates.
 pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges {
-    // Each candidate's random stream is keyed by its position (on a grid far finer than the
-    // spacing), not by its id, so the same point gets the same stream in any file layout.
-    let q = r.kappa / 4096.0;
-    let ids: Vec<u64> = candidates.iter().map(|&i| position_key(cloud.at(i as usize) + cloud.origin, q)).collect();
     let pp = ProjectParams {
         radius: r.rmls_radius,
         reach: r.halo(),
@@ -230,8 +246,10 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges 
         seed: r.seed,
         noise: r.noise,
         max_rms: (SURFACE_NOISE * r.surface_noise).max(0.25 * r.scale),
+        key_quantum: snap_quantum(r.kappa),
+        model: r.model,
     };
-    let projected = project(cloud, candidates, &ids, &pp);
+    let projected = project(cloud, candidates, &pp);
     let one_surface = projected.iter().filter(|x| x.surfaces == 1 && !x.scattered).count() as u64;
     let scattered = projected.iter().filter(|x| x.scattered).count() as u64;
     let o = cloud.origin;
@@ -240,15 +258,83 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges 
     TileEdges { edges, corners, candidates: candidates.len() as u64, one_surface, scattered }
 }
 
-/// Projects every candidate (by index into `cloud`). `ids` gives each candidate a global
-/// identity so that its random stream does not depend on tiling or thread count.
-pub fn project(cloud: &Cloud, candidates: &[u32], ids: &[u64], p: &ProjectParams) -> Vec<Projected> {
-    // Candidate k's stream is ids[k]; map the cloud index back to it.
-    let mut slot: Vec<(u32, u64)> = candidates.iter().copied().zip(ids.iter().copied()).collect();
+/// Projects every candidate (by index into `cloud`) by the model `p.model` asks for.
+pub fn project(cloud: &Cloud, candidates: &[u32], p: &ProjectParams) -> Vec<Projected> {
+    match p.model {
+        Model::Balls => project_balls(cloud, candidates, p),
+        Model::Cells => project_cells(cloud, candidates, p),
+    }
+}
+
+/// Projects every candidate (by index into `cloud`) with a forward search over its own ball,
+/// its random stream keyed by its position (on the grid of the point keys), so the same in any
+/// tiling.
+fn project_balls(cloud: &Cloud, candidates: &[u32], p: &ProjectParams) -> Vec<Projected> {
+    let (o, q) = (cloud.origin, p.key_quantum);
+    let mut slot: Vec<(u32, u64)> = candidates.iter().map(|&i| (i, position_key(cloud.at(i as usize) + o, q))).collect();
     slot.sort_unstable_by_key(|s| s.0);
     let id_of = |i: u32| slot[slot.binary_search_by_key(&i, |s| s.0).expect("candidate")].1;
     let nb = Neighbourhood { radius: p.radius, reach: p.reach, min: MIN_NEIGHBOURS, max: MAX_NEIGHBOURS, ordered: true };
-    cloud.map_neighbourhoods(candidates, nb, Scratch::default, |scratch, i, buf| project_one(cloud, i as usize, id_of(i), p, buf, scratch))
+    cloud.map_neighbourhoods(candidates, nb, Scratch::default, |s, i, buf| {
+        let x = cloud.at(i as usize);
+        s.pts.clear();
+        s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
+        match search(s, id_of(i), p) {
+            Ok(found) => {
+                let reach = buf.iter().map(|&(_, d2)| (d2 as f64).sqrt()).fold(p.radius, f64::max);
+                solve(&[x], x, found, &s.pts, reach, p).pop().unwrap_or_default()
+            }
+            Err(end) => end.projected(),
+        }
+    })
+}
+
+/// Projects every candidate (by index into `cloud`), with one forward search per cell of
+/// candidates (see [`CELL_SHARE`]): over the ball around the cell's centre, its random stream
+/// keyed by the cell, so the same in any tiling. Each candidate is then projected onto the
+/// two of the cell's surfaces nearest to it, refined over the cell's ball once for each choice
+/// of surfaces the cell's candidates make.
+fn project_cells(cloud: &Cloud, candidates: &[u32], p: &ProjectParams) -> Vec<Projected> {
+    use rayon::prelude::*;
+    let side = CELL_SHARE * p.radius;
+    let (o, q) = (cloud.origin, p.key_quantum);
+    // Candidates by cell (as [cell, index into `candidates`]).
+    let mut members: Vec<([i64; 3], u32)> =
+        candidates.par_iter().enumerate().map(|(m, &i)| (crate::grid::cell(((cloud.at(i as usize) + o) / q).round() * q, side).to_array(), m as u32)).collect();
+    members.par_sort_unstable();
+    let mut cells: Vec<std::ops::Range<usize>> = Vec::new();
+    for k in 0..members.len() {
+        if k == 0 || members[k].0 != members[k - 1].0 {
+            cells.push(k..k);
+        }
+        cells.last_mut().expect("a cell").end = k + 1;
+    }
+    let centres: Vec<DVec3> = cells.iter().map(|c| (glam::I64Vec3::from_array(members[c.start].0).as_dvec3() + 0.5) * side - o).collect();
+    // (The centre's ball is widened no farther than the halo less a cell's half diagonal.)
+    let reach = (p.reach - 0.5 * side * 3f64.sqrt()).max(p.radius);
+    let nb = Neighbourhood { radius: p.radius, reach, min: MIN_NEIGHBOURS, max: MAX_NEIGHBOURS, ordered: true };
+    let solved: Vec<Vec<Projected>> = cloud.map_neighbourhoods_at(&centres, nb, Scratch::default, |s, k, buf| {
+        let cell = &members[cells[k as usize].clone()];
+        let xs: Vec<DVec3> = cell.iter().map(|m| cloud.at(candidates[m.1 as usize] as usize)).collect();
+        s.pts.clear();
+        s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
+        let key: Vec<u8> = cell[0].0.iter().flat_map(|v| v.to_le_bytes()).collect();
+        match search(s, crate::keys::fnv1a(&key), p) {
+            Ok(found) => {
+                let reach = buf.iter().map(|&(_, d2)| (d2 as f64).sqrt()).fold(p.radius, f64::max);
+                solve(&xs, centres[k as usize], found, &s.pts, reach, p)
+            }
+            Err(end) => vec![end.projected(); xs.len()],
+        }
+    });
+    let mut out = vec![Projected::default(); candidates.len()];
+    for (c, solved) in cells.iter().zip(solved) {
+        // (A cancelled pass leaves cells unsolved.)
+        for (m, x) in members[c.clone()].iter().zip(solved) {
+            out[m.1 as usize] = x;
+        }
+    }
+    out
 }
 
 #[derive(Default)]
@@ -260,6 +346,7 @@ struct Scratch {
     d: Vec<(f64, usize)>,
 }
 
+#[derive(Clone)]
 struct Surface {
     quad: Quadric,
     /// Inlier threshold (noise-scaled distance from the surface).
@@ -275,14 +362,39 @@ impl Surface {
     }
 }
 
-fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32, f32)], s: &mut Scratch) -> Projected {
-    let x = cloud.at(i);
-    s.pts.clear();
-    s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
+/// The surfaces a forward search found in a neighbourhood.
+#[derive(Clone)]
+struct Found {
+    surfaces: Vec<Surface>,
+    /// True if the two were split from one surface (see [`split_lone_surface`]).
+    lone_split: bool,
+}
+
+/// Why a search ended without surfaces that could meet at an edge.
+#[derive(Clone, Copy)]
+enum NoEdge {
+    /// Too few points to tell surfaces apart.
+    TooFew,
+    /// The best-fitting surface fits worse than an edge's surfaces may.
+    Scatter,
+}
+
+impl NoEdge {
+    fn projected(self) -> Projected {
+        match self {
+            NoEdge::TooFew => Projected::default(),
+            NoEdge::Scatter => Projected { surfaces: 1, scattered: true, ..Default::default() },
+        }
+    }
+}
+
+/// The forward search over the neighbourhood `s.pts` (random stream `id`): its surfaces, or
+/// what the candidate is if they cannot meet at an edge (scatter).
+fn search(s: &mut Scratch, id: u64, p: &ProjectParams) -> Result<Found, NoEdge> {
     let n = s.pts.len();
     let min_count = (n / 10).max(6);
     if n < 2 * min_count {
-        return Projected::default();
+        return Err(NoEdge::TooFew);
     }
     let mut rng = Rng::stream(p.seed, id);
     s.remaining.clear();
@@ -293,7 +405,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
         // The first surface is the best fitting one here (least quantile of squares). If even
         // it fits worse than an edge's surfaces may, the neighbourhood is scatter.
         if surfaces.is_empty() && surf.too_rough(p.max_rms) {
-            return Projected { surfaces: 1, scattered: true, ..Default::default() };
+            return Err(NoEdge::Scatter);
         }
         // A "new" surface (nearly) parallel to one already found is the same surface's
         // leftovers. (How sharp a crease is can only be told once its edge is known: see
@@ -312,21 +424,45 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
         surfaces = pair;
         lone_split = true;
     }
-    let mut out = Projected { surfaces: surfaces.len() as u8, ..Default::default() };
+    Ok(Found { surfaces, lone_split })
+}
+
+/// Projects each of `xs` onto the intersection of the two of `found`'s surfaces nearest to it
+/// (a third, if any, for a corner), refined over the neighbourhood `pts` of `centre` (whose
+/// farthest point is `reach` away) once for each choice of surfaces.
+fn solve(xs: &[DVec3], centre: DVec3, found: Found, pts: &[DVec3], reach: f64, p: &ProjectParams) -> Vec<Projected> {
+    let Found { surfaces, lone_split } = found;
+    let base = Projected { surfaces: surfaces.len() as u8, ..Default::default() };
     if surfaces.len() < 2 {
-        return out;
+        return vec![base; xs.len()];
     }
-    // The surfaces nearest to the candidate.
-    surfaces.sort_by(|a, b| a.quad.value(x).abs().total_cmp(&b.quad.value(x).abs()));
-    let k = surfaces.len().min(3);
     let tol = 1e-7 * p.radius;
-    refine(&mut surfaces[..k], &s.pts, x, p.min_threshold, tol);
+    let mut refined: Vec<(Vec<usize>, Vec<Surface>)> = Vec::new();
+    xs.iter()
+        .map(|&x| {
+            // The surfaces nearest to the candidate.
+            let mut nearest: Vec<usize> = (0..surfaces.len()).collect();
+            nearest.sort_by(|&a, &b| surfaces[a].quad.value(x).abs().total_cmp(&surfaces[b].quad.value(x).abs()));
+            nearest.truncate(3);
+            let at = refined.iter().position(|r| r.0 == nearest).unwrap_or_else(|| {
+                let mut chosen: Vec<Surface> = nearest.iter().map(|&a| surfaces[a].clone()).collect();
+                refine(&mut chosen, pts, centre, p.min_threshold, tol);
+                refined.push((nearest, chosen));
+                refined.len() - 1
+            });
+            finish(x, &refined[at].1, lone_split, base, pts, reach, p)
+        })
+        .collect()
+}
+
+/// The edge (and corner) point of `x` on the refined surfaces `surfaces` (nearest first).
+fn finish(x: DVec3, surfaces: &[Surface], lone_split: bool, mut out: Projected, pts: &[DVec3], reach: f64, p: &ProjectParams) -> Projected {
+    let tol = 1e-7 * p.radius;
     if surfaces[..2].iter().any(|sf| sf.too_rough(p.max_rms)) {
         out.scattered = true;
         return out;
     }
     let Some(e) = project_to_intersection(x, &surfaces[0].quad, &surfaces[1].quad, tol) else { return out };
-    let reach = buf.iter().map(|&(_, d2)| (d2 as f64).sqrt()).fold(p.radius, f64::max);
     if e.distance(x) > reach {
         return out;
     }
@@ -338,7 +474,7 @@ fn project_one(cloud: &Cloud, i: usize, id: u64, p: &ProjectParams, buf: &[(u32,
     if lone_split && crease > LONE_SPLIT_MAX_DEG {
         return out;
     }
-    if crease <= ON_DATA_MAX_DEG && !reaches_the_edge(&s.pts, e, wedge.t, ON_DATA_NOISE * p.noise, p.radius / 2.0) {
+    if crease <= ON_DATA_MAX_DEG && !reaches_the_edge(pts, e, wedge.t, ON_DATA_NOISE * p.noise, p.radius / 2.0) {
         return out;
     }
     out.edge = Some(EdgePoint { p: e, n: wedge.normals() });
@@ -857,6 +993,8 @@ mod tests {
             seed: 1,
             noise: deviation,
             max_rms: (SURFACE_NOISE * deviation).max(1e-4),
+            key_quantum: 1e-9,
+            model: Model::Balls,
         }
     }
 
@@ -881,9 +1019,8 @@ mod tests {
             p.y > 0.5 && p.y < 1.5 && DVec3::new(p.x, 0.0, p.z).length() < radius / 2.0
         };
         let cand: Vec<u32> = (0..cloud.len() as u32).filter(|&i| near(i)).collect();
-        let ids: Vec<u64> = cand.iter().map(|&i| cloud.gid[i as usize]).collect();
         let p = test_params(radius, noise);
-        let offsets: Vec<f64> = project(&cloud, &cand, &ids, &p).iter().filter_map(|o| o.edge).map(|e| (e.p + cloud.origin).dot(out_dir)).collect();
+        let offsets: Vec<f64> = project(&cloud, &cand, &p).iter().filter_map(|o| o.edge).map(|e| (e.p + cloud.origin).dot(out_dir)).collect();
         (offsets.iter().sum::<f64>() / offsets.len() as f64, offsets.len(), cand.len())
     }
 
@@ -955,8 +1092,7 @@ mod tests {
         let world: Vec<DVec3> = (0..20_000).map(|_| DVec3::new(rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), rng.range(-0.3, 0.3))).collect();
         let cloud = Cloud::new(&world);
         let candidates: Vec<u32> = (0..cloud.len() as u32).filter(|&i| (cloud.at(i as usize) + cloud.origin).length() < 0.1).collect();
-        let ids: Vec<u64> = candidates.iter().map(|&i| i as u64).collect();
-        let out = project(&cloud, &candidates, &ids, &test_params(0.1, 0.005));
+        let out = project(&cloud, &candidates, &test_params(0.1, 0.005));
         assert!(candidates.len() > 50);
         for r in &out {
             assert!(r.scattered && r.edge.is_none() && r.surfaces == 1, "{r:?}");
@@ -1060,8 +1196,7 @@ mod tests {
             p.y > 0.5 && p.y < 1.5 && DVec3::new(p.x - mid.x, 0.0, p.z - mid.z).length() < radius / 2.0
         };
         let cand: Vec<u32> = (0..cloud.len() as u32).filter(|&i| near(i)).collect();
-        let ids: Vec<u64> = cand.iter().map(|&i| cloud.gid[i as usize]).collect();
-        let edges = project(&cloud, &cand, &ids, &test_params(radius, noise)).iter().filter(|o| o.edge.is_some()).count();
+        let edges = project(&cloud, &cand, &test_params(radius, noise)).iter().filter(|o| o.edge.is_some()).count();
         (edges, cand.len())
     }
 
@@ -1099,9 +1234,8 @@ mod tests {
                     (p.x.hypot(p.y) - hole).abs() < 0.03 && p.z.abs() < 0.03 && p.x.abs() < 0.2
                 })
                 .collect();
-            let ids: Vec<u64> = candidates.iter().map(|&i| i as u64).collect();
             let p = test_params(radius, noise);
-            let out = project(&cloud, &candidates, &ids, &p);
+            let out = project(&cloud, &candidates, &p);
             let split = out.iter().filter(|r| r.surfaces >= 3).count();
             assert!(split * 50 < out.len(), "seed {seed}: {split} of {} candidates found the wall split in two", out.len());
             let edges: Vec<DVec3> = out.iter().filter_map(|r| r.edge).map(|e| e.p + cloud.origin).collect();

@@ -78,6 +78,25 @@ fn a_share_of_the_points_evaluated_is_the_same_in_any_tiling() {
     }
 }
 
+/// The shared search of `--model cells` decides the same in any tiling: a noisy cube at 1 tile
+/// and at 8 and 27 gives the same curves, byte for byte (a cell's search runs over the ball
+/// around its centre, its random stream keyed by the cell, in whichever tile holds its
+/// candidates; a cell across a tile border is searched the same from either side).
+#[test]
+fn cells_search_the_same_in_any_tiling() {
+    let d = tempfile::tempdir().unwrap();
+    let input = vec![fixture("cube_noise005.las")];
+    let params = Params { model: Some(crease::extract::params::Model::Cells), ..Params::default() };
+    let one = run_extract(&input, &d.path().join("one"), &params, &Filter::default(), &opts(Some(10.0))).unwrap();
+    let balls = run_extract(&input, &d.path().join("balls"), &Params::default(), &Filter::default(), &opts(Some(10.0))).unwrap();
+    assert_ne!(one.counts.edge_points, balls.counts.edge_points, "the cells model projected as the balls model does");
+    assert!(one.counts.curves >= 12, "{} curves", one.counts.curves);
+    let curves = |run: &str| std::fs::read(d.path().join(run).join("curves.obj")).unwrap();
+    for r in same_in_smaller_tiles(d.path(), &input, &params, &one) {
+        assert_eq!(curves(&format!("t{}", r.tile_size)), curves("one"), "curves with {} tiles", r.tiles);
+    }
+}
+
 /// Runs `input` with `params` at tiles of 0.5 and 0.34 (8 and 27 tiles of a unit cloud or
 /// more), asserting each gives the parameters, tau to the bit and the curves of `one`, the run
 /// at one tile in `dir/one`; returns the runs' reports for further checks.
