@@ -729,6 +729,17 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
                     w.count
                 )));
             }
+            // (A manifest edited to point at another run's work directory would mix the two
+            // runs' tiles and results.)
+            if let Some(w) = &m.work_dir
+                && let Ok(held) = std::fs::read_to_string(w.join(WORK_OWNER))
+                && ws.root().canonicalize().is_ok_and(|run| held != format!("{}\n", run.display()))
+            {
+                return Err(Error::damaged(
+                    ws.path(manifest::NAME),
+                    format!("its work directory {} holds the working data of the run in {}", w.display(), held.trim()),
+                ));
+            }
             use_work_dir(ws, &m)?;
             // (An edited or damaged manifest must not size what the run allocates.)
             let g = &m.grid;

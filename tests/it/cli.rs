@@ -95,6 +95,18 @@ fn working_data_goes_to_the_work_dir_and_clean_removes_it() {
     let (code, err) = run(&["extract", cube, "-o", &p("run2"), "-q", "--work-dir", &p("scratch")]);
     assert_eq!(code, Some(crease::error::exit::USAGE));
     assert!(err.contains("holds the working data of the run in"), "{err}");
+    // A manifest edited to point at another run's work directory is refused as damaged.
+    stdout(&["extract", cube, "-o", &p("run3"), "-q", "--work-dir", &p("scratch3")]);
+    let manifest = d.path().join("run3/manifest.json");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let scratch3 = std::fs::canonicalize(d.path().join("scratch3")).unwrap();
+    let scratch = std::fs::canonicalize(d.path().join("scratch")).unwrap();
+    std::fs::write(&manifest, text.replace(&*scratch3.to_string_lossy(), &scratch.to_string_lossy())).unwrap();
+    let (code, err) = run(&["extract", cube, "-o", &p("run3"), "-q", "--min-confidence", "0.5"]);
+    assert_eq!(code, Some(crease::error::exit::DATA), "{err}");
+    assert!(err.contains("damaged") && err.contains("holds the working data of the run in"), "{err}");
+    std::fs::write(&manifest, &text).unwrap();
+    stdout(&["extract", cube, "-o", &p("run3"), "-q", "--min-confidence", "0.5"]);
     // --clean, on a finished run with a work directory and on one without.
     stdout(&["extract", cube, "-o", &p("run"), "-q", "--clean"]);
     assert!(!d.path().join("scratch").exists());
