@@ -16,17 +16,24 @@ fn write_ply(path: &Path, points: &[DVec3]) {
     w.finish().unwrap();
 }
 
+/// A 20 k-point cube, written to `dir/cube.ply` and extracted into `dir/run_plain`, which must
+/// give its 12 curves: the points and the curves (OBJ bytes).
+fn plain_cube(dir: &Path) -> (Vec<DVec3>, Vec<u8>) {
+    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let plain = dir.join("cube.ply");
+    write_ply(&plain, &cube);
+    let curves = extract(&plain, &dir.join("run_plain"));
+    assert_eq!(crease::curves::read_obj(&dir.join("run_plain/curves.obj")).unwrap().len(), 12);
+    (cube, curves)
+}
+
 /// A cube whose every point is written ten times, and one with 20 k copies of a single point
 /// added, give the cube's 12 curves where the cube alone gives them. (Not to the byte: the
 /// statistics sample is drawn at a rate set by the point count, copies included.)
 #[test]
 fn copies_of_points_change_nothing() {
     let d = tempfile::tempdir().unwrap();
-    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
-    let plain = d.path().join("cube.ply");
-    write_ply(&plain, &cube);
-    extract(&plain, &d.path().join("run_plain"));
-    assert_eq!(crease::curves::read_obj(&d.path().join("run_plain/curves.obj")).unwrap().len(), 12);
+    let (cube, _) = plain_cube(d.path());
     let tenfold: Vec<DVec3> = (0..10).flat_map(|_| cube.iter().copied()).collect();
     let one_point: Vec<DVec3> = cube.iter().copied().chain(std::iter::repeat_n(cube[17], 20_000)).collect();
     for (name, points) in [("tenfold.ply", tenfold), ("one_point.ply", one_point)] {
@@ -54,11 +61,7 @@ fn copies_of_points_change_nothing() {
 #[test]
 fn stray_points_far_out_are_left_out_with_a_warning() {
     let d = tempfile::tempdir().unwrap();
-    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
-    let plain = d.path().join("cube.ply");
-    write_ply(&plain, &cube);
-    let alone = extract(&plain, &d.path().join("run_plain"));
-    assert_eq!(crease::curves::read_obj(&d.path().join("run_plain/curves.obj")).unwrap().len(), 12);
+    let (cube, alone) = plain_cube(d.path());
     let strays = [vec![1e20], vec![1e6], vec![1e20, 1e6, 1e3], vec![1e300]];
     for far in strays {
         let mut points = cube.clone();
