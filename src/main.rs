@@ -106,13 +106,15 @@ struct ParamArgs {
     evaluate_per_fit: Option<f64>,
     /// How the projection searches for the surfaces meeting at a candidate: `balls`, one
     /// search per candidate; `cells`, one per cell of nearby candidates, shared (faster under
-    /// noise, at a little recall and precision).
+    /// noise, at a little recall and precision); `patches`, surfaces first: each candidate's
+    /// ball split into the pieces of surface that the band of candidates separates, each
+    /// searched on its own (experimental).
     #[arg(long, value_name = "MODEL", value_parser = parse_model)]
     model: Option<crease::extract::params::Model>,
 }
 
 fn parse_model(s: &str) -> Result<crease::extract::params::Model, String> {
-    crease::extract::params::Model::parse(s).ok_or_else(|| format!("'{s}' is not a model: balls or cells"))
+    crease::extract::params::Model::parse(s).ok_or_else(|| format!("'{s}' is not a model: balls, cells or patches"))
 }
 
 impl ParamArgs {

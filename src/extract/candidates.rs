@@ -92,6 +92,17 @@ pub fn tile_candidates(cloud: &Cloud, is_core: &[bool], res: &TileResiduals, tau
     cand
 }
 
+/// Which points of a tile's `cloud`, core and halo, are candidates at threshold `tau`, from the
+/// residual records of the tiles around it (`around`, which must include every tile whose core
+/// the halo reaches). A point no record holds counts as a candidate: it is kept out of the
+/// patches of the surfaces-first projection rather than let link two of them.
+pub fn band_of(cloud: &Cloud, around: &[TileResiduals], tau: f64) -> Vec<bool> {
+    use rayon::prelude::*;
+    let mut by_gid: Vec<(u64, bool)> = around.iter().flat_map(|t| t.gid.iter().copied().zip(t.residual.iter().map(|r| r.is_candidate(tau)))).collect();
+    by_gid.par_sort_unstable();
+    cloud.gid.par_iter().map(|g| by_gid.binary_search_by_key(g, |e| e.0).map_or(true, |k| by_gid[k].1)).collect()
+}
+
 /// The fit residual of every point in `which`, for neighbourhood radius `r`; sparse
 /// neighbourhoods are widened up to `reach` (see [`Neighbourhood::reach`]). With `creases`
 /// (for clouds whose neighbourhoods are sized by the noise), points also take the crease test.

@@ -46,14 +46,20 @@ pub enum Model {
     /// around the cell's centre, shared by its candidates: faster under noise, where the band
     /// of candidates along a feature widens, at a little recall and precision.
     Cells,
+    /// Surfaces first: within each candidate's ball, the points off the band of candidates
+    /// fall into patches (their connected pieces, which the band separates at every feature),
+    /// and each patch is searched for surfaces on its own, so no fit takes points of a surface
+    /// across a feature, however close.
+    Patches,
 }
 
 impl Model {
-    /// The model named `name` (`balls` or `cells`).
+    /// The model named `name` (`balls`, `cells` or `patches`).
     pub fn parse(name: &str) -> Option<Model> {
         match name {
             "balls" => Some(Model::Balls),
             "cells" => Some(Model::Cells),
+            "patches" => Some(Model::Patches),
             _ => None,
         }
     }

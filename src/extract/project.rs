@@ -18,6 +18,14 @@
 //! along a feature, not the number of cells it crosses, so the cost of the shared search grows
 //! with the length of the features rather than with the candidates; but one search decides
 //! for a cell's candidates together, and its errors do not average out over them.
+//!
+//! [`Model::Patches`] searches surfaces first (Daniels 2008, section 4.1, segments bounded by
+//! the feature curves): in a candidate's ball, the points that are not candidates fall into
+//! patches, the connected pieces that the band of candidates along every feature separates,
+//! and each patch is searched on its own, so that no surface takes points across a feature,
+//! however close the surface beyond it (a slot's far wall, a plate's far face). The band's
+//! own points are searched only where the patches gave fewer than two surfaces (a face too
+//! narrow to leave points off the band).
 
 use super::fit::{project_to_corner, project_to_intersection, Frame, Pca, Quadric};
 use super::neighbourhood::{Cloud, Neighbourhood};
@@ -236,8 +244,10 @@ pub struct TileEdges {
 }
 
 /// Stage 2 for one tile: projects the `candidates` (indices into the tile's `cloud`) with the
-/// parameters `r`. Returns edge and corner points in world coordinates.
-pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges {
+/// parameters `r`. `band` flags every point of the cloud, core and halo, that is a candidate
+/// (see [`super::candidates::band_of`]); the patches model needs it, and without it takes
+/// `candidates` for the only ones. Returns edge and corner points in world coordinates.
+pub fn tile_edges(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, r: &Resolved) -> TileEdges {
     let pp = ProjectParams {
         radius: r.rmls_radius,
         reach: r.halo(),
@@ -249,7 +259,7 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges 
         key_quantum: snap_quantum(r.kappa),
         model: r.model,
     };
-    let projected = project(cloud, candidates, &pp);
+    let projected = project(cloud, candidates, band, &pp);
     let one_surface = projected.iter().filter(|x| x.surfaces == 1 && !x.scattered).count() as u64;
     let scattered = projected.iter().filter(|x| x.scattered).count() as u64;
     let o = cloud.origin;
@@ -258,11 +268,25 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], r: &Resolved) -> TileEdges 
     TileEdges { edges, corners, candidates: candidates.len() as u64, one_surface, scattered }
 }
 
-/// Projects every candidate (by index into `cloud`) by the model `p.model` asks for.
-pub fn project(cloud: &Cloud, candidates: &[u32], p: &ProjectParams) -> Vec<Projected> {
+/// Projects every candidate (by index into `cloud`) by the model `p.model` asks for; `band`
+/// as [`tile_edges`] takes it.
+pub fn project(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, p: &ProjectParams) -> Vec<Projected> {
     match p.model {
         Model::Balls => project_balls(cloud, candidates, p),
         Model::Cells => project_cells(cloud, candidates, p),
+        Model::Patches => {
+            let own;
+            let band = match band {
+                Some(b) => b,
+                None => {
+                    let mut b = vec![false; cloud.len()];
+                    candidates.iter().for_each(|&i| b[i as usize] = true);
+                    own = b;
+                    &own
+                }
+            };
+            project_patches(cloud, candidates, band, p)
+        }
     }
 }
 
@@ -287,6 +311,154 @@ fn project_balls(cloud: &Cloud, candidates: &[u32], p: &ProjectParams) -> Vec<Pr
             Err(end) => end.projected(),
         }
     })
+}
+
+/// Projects every candidate (by index into `cloud`) with a search of its own ball that takes
+/// the patches first (see [`patch_search`]), its random stream keyed as in [`project_balls`].
+fn project_patches(cloud: &Cloud, candidates: &[u32], band: &[bool], p: &ProjectParams) -> Vec<Projected> {
+    let (o, q) = (cloud.origin, p.key_quantum);
+    let mut slot: Vec<(u32, u64)> = candidates.iter().map(|&i| (i, position_key(cloud.at(i as usize) + o, q))).collect();
+    slot.sort_unstable_by_key(|s| s.0);
+    let id_of = |i: u32| slot[slot.binary_search_by_key(&i, |s| s.0).expect("candidate")].1;
+    let nb = Neighbourhood { radius: p.radius, reach: p.reach, min: MIN_NEIGHBOURS, max: MAX_NEIGHBOURS, ordered: true };
+    cloud.map_neighbourhoods(candidates, nb, Scratch::default, |s, i, buf| {
+        let x = cloud.at(i as usize);
+        s.pts.clear();
+        s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
+        let on_band: Vec<bool> = buf.iter().map(|&(j, _)| band[j as usize]).collect();
+        let reach = buf.iter().map(|&(_, d2)| (d2 as f64).sqrt()).fold(p.radius, f64::max);
+        match patch_search(s, &on_band, x, reach, id_of(i), p) {
+            Ok(found) => solve(&[x], x, found, &s.pts, reach, p).pop().unwrap_or_default(),
+            Err(end) => end.projected(),
+        }
+    })
+}
+
+/// Points off the band of candidates are linked into one patch when they lie within this many
+/// mean spacings of one another (the spacing a single surface through the ball would have):
+/// enough to bridge the gaps noise and thinning leave in a surface, few against the band of
+/// candidates along a feature, which is about two fit radii wide.
+const LINK_SPACINGS: f64 = 2.5;
+
+/// Most surfaces a patch search keeps (the nearest three meet at a candidate).
+const MAX_PATCH_SURFACES: usize = 8;
+
+/// The surfaces around `x` in the neighbourhood `s.pts` (`reach` wide, `on_band` flagging its
+/// candidates), surfaces first: the points off the band fall into patches, the connected
+/// pieces of the surfaces between the features, and each patch, largest first, is searched
+/// for surfaces on its own (the forward search of [`find_surface`], restricted to it), so that
+/// no surface takes points across a feature; then the band's points that no surface took are
+/// searched, for the faces too narrow to leave points off the band (a small chamfer).
+fn patch_search(s: &mut Scratch, on_band: &[bool], x: DVec3, reach: f64, id: u64, p: &ProjectParams) -> Result<Found, NoEdge> {
+    let n = s.pts.len();
+    let min_count = (n / 10).max(6);
+    if n < 2 * min_count {
+        return Err(NoEdge::TooFew);
+    }
+    let mut rng = Rng::stream(p.seed, id);
+    let off: Vec<usize> = (0..n).filter(|&j| !on_band[j]).collect();
+    let link = LINK_SPACINGS * (std::f64::consts::PI * reach * reach / n as f64).sqrt();
+    let mut pools = patches(&s.pts, &off, x, link);
+    pools.retain(|c| c.len() >= min_count);
+    pools.push((0..n).filter(|&j| on_band[j]).collect());
+    let split = (MIN_SPLIT_FRACTION * p.min_angle_deg).to_radians().cos();
+    let mut surfaces: Vec<Surface> = Vec::new();
+    let last = pools.len() - 1;
+    for (k, pool) in pools.into_iter().enumerate() {
+        s.remaining.clear();
+        if k == last {
+            // Only faces too narrow to leave points off the band are looked for there: where
+            // the patches gave two surfaces, the band's own "surfaces" were mostly its noise.
+            if surfaces.len() >= 2 {
+                break;
+            }
+            s.remaining.extend(pool.into_iter().filter(|&j| surfaces.iter().all(|sf| sf.quad.value(s.pts[j]).abs() > sf.threshold)));
+        } else {
+            s.remaining.extend(pool);
+        }
+        let first_here = surfaces.len();
+        while s.remaining.len() >= min_count && surfaces.len() < MAX_PATCH_SURFACES {
+            let Some(surf) = find_surface(s, &mut rng, p.min_threshold, min_count, SEED_FLOOR * p.noise) else { break };
+            if surfaces.is_empty() && surf.too_rough(p.max_rms) {
+                return Err(NoEdge::Scatter);
+            }
+            // Within one pool, a surface parallel to one found there is its leftovers; across
+            // pools, parallel surfaces are distinct (a plate's two faces, a slot's walls), and
+            // `solve` does not intersect them.
+            let nn = surf.quad.frame.n;
+            if surfaces[first_here..].iter().all(|o| o.quad.frame.n.dot(nn).abs() < split) {
+                surfaces.push(surf);
+            }
+        }
+    }
+    let mut lone_split = false;
+    if let [lone] = surfaces.as_slice()
+        && let Some(pair) = split_lone_surface(lone, &s.pts, p.min_threshold)
+    {
+        surfaces = pair;
+        lone_split = true;
+    }
+    Ok(Found { surfaces, lone_split })
+}
+
+/// The connected pieces of the points `members` of `pts`, two points linked when within `link`
+/// of each other: each piece's members in increasing order, the largest piece first (ties by
+/// their first member). Points are binned in cells `link` wide about `centre`.
+fn patches(pts: &[DVec3], members: &[usize], centre: DVec3, link: f64) -> Vec<Vec<usize>> {
+    let cell = |q: DVec3| ((q - centre) / link).floor().as_i64vec3().to_array();
+    let mut by: Vec<([i64; 3], usize)> = members.iter().map(|&j| (cell(pts[j]), j)).collect();
+    by.sort_unstable();
+    let mut parent: Vec<usize> = (0..by.len()).collect();
+    fn root(parent: &mut [usize], mut a: usize) -> usize {
+        while parent[a] != a {
+            parent[a] = parent[parent[a]];
+            a = parent[a];
+        }
+        a
+    }
+    let l2 = link * link;
+    for a in 0..by.len() {
+        let c = by[a].0;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let key = [c[0] + dx, c[1] + dy, c[2] + dz];
+                    // (Each pair once: from the earlier of the two in cell order.)
+                    if key < c {
+                        continue;
+                    }
+                    let from = by.partition_point(|e| e.0 < key);
+                    for b in from..by.len() {
+                        if by[b].0 != key {
+                            break;
+                        }
+                        if (key == c && b <= a) || pts[by[a].1].distance_squared(pts[by[b].1]) > l2 {
+                            continue;
+                        }
+                        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+                        if ra != rb {
+                            parent[ra.max(rb)] = ra.min(rb);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let mut pieces: Vec<Vec<usize>> = Vec::new();
+    let mut slot_of = vec![usize::MAX; by.len()];
+    for (a, &(_, j)) in by.iter().enumerate() {
+        let r = root(&mut parent, a);
+        if slot_of[r] == usize::MAX {
+            slot_of[r] = pieces.len();
+            pieces.push(Vec::new());
+        }
+        pieces[slot_of[r]].push(j);
+    }
+    for p in pieces.iter_mut() {
+        p.sort_unstable();
+    }
+    pieces.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
+    pieces
 }
 
 /// Projects every candidate (by index into `cloud`), with one forward search per cell of
@@ -437,13 +609,24 @@ fn solve(xs: &[DVec3], centre: DVec3, found: Found, pts: &[DVec3], reach: f64, p
         return vec![base; xs.len()];
     }
     let tol = 1e-7 * p.radius;
+    let split = (MIN_SPLIT_FRACTION * p.min_angle_deg).to_radians().cos();
     let mut refined: Vec<(Vec<usize>, Vec<Surface>)> = Vec::new();
     xs.iter()
         .map(|&x| {
-            // The surfaces nearest to the candidate.
-            let mut nearest: Vec<usize> = (0..surfaces.len()).collect();
-            nearest.sort_by(|&a, &b| surfaces[a].quad.value(x).abs().total_cmp(&surfaces[b].quad.value(x).abs()));
-            nearest.truncate(3);
+            // The surfaces nearest to the candidate, each at an angle to those nearer (a
+            // surface parallel to a nearer one, such as a plate's far face, meets neither).
+            let mut order: Vec<usize> = (0..surfaces.len()).collect();
+            order.sort_by(|&a, &b| surfaces[a].quad.value(x).abs().total_cmp(&surfaces[b].quad.value(x).abs()));
+            let mut nearest: Vec<usize> = Vec::with_capacity(3);
+            for a in order {
+                let na = surfaces[a].quad.frame.n;
+                if nearest.len() < 3 && nearest.iter().all(|&b| surfaces[b].quad.frame.n.dot(na).abs() < split) {
+                    nearest.push(a);
+                }
+            }
+            if nearest.len() < 2 {
+                return base;
+            }
             let at = refined.iter().position(|r| r.0 == nearest).unwrap_or_else(|| {
                 let mut chosen: Vec<Surface> = nearest.iter().map(|&a| surfaces[a].clone()).collect();
                 refine(&mut chosen, pts, centre, p.min_threshold, tol);
@@ -981,6 +1164,25 @@ pub fn seeded_groups(corners: &[CornerPoint], radius: f64, min_support: usize) -
 mod tests {
     use super::*;
 
+    /// Two parallel sheets closer than a patch search's ball is wide stay two patches when
+    /// they are farther apart than the link, and a sheet cut by a band wider than the link
+    /// falls in two.
+    #[test]
+    fn patches_are_the_pieces_that_the_band_and_the_gaps_separate() {
+        let grid = |z: f64, xs: std::ops::Range<i32>| xs.flat_map(move |i| (0..10).map(move |j| DVec3::new(i as f64 * 0.1, j as f64 * 0.1, z)));
+        let pts: Vec<DVec3> = grid(0.0, 0..10).chain(grid(0.25, 0..10)).collect();
+        let all: Vec<usize> = (0..pts.len()).collect();
+        let pieces = patches(&pts, &all, DVec3::ZERO, 0.15);
+        assert_eq!(pieces.iter().map(|p| p.len()).collect::<Vec<_>>(), vec![100, 100]);
+        assert_eq!(pieces[0], (0..100).collect::<Vec<_>>());
+        // One sheet, the columns 4 and 5 on the band (left out): two pieces of 40.
+        let off: Vec<usize> = (0..100).filter(|&k| !(40..60).contains(&k)).collect();
+        let pieces = patches(&pts, &off, DVec3::new(0.45, 0.45, 0.0), 0.15);
+        assert_eq!(pieces.iter().map(|p| p.len()).collect::<Vec<_>>(), vec![40, 40]);
+        // With a link wider than the band's gap, one.
+        assert_eq!(patches(&pts, &off, DVec3::ZERO, 0.35).len(), 1);
+    }
+
     /// Projection parameters for a ball of `radius` in a cloud moved by noise uniform in a ball
     /// of radius `noise` (whose deviation about a plane is noise / sqrt 5).
     fn test_params(radius: f64, noise: f64) -> ProjectParams {
@@ -1020,7 +1222,7 @@ mod tests {
         };
         let cand: Vec<u32> = (0..cloud.len() as u32).filter(|&i| near(i)).collect();
         let p = test_params(radius, noise);
-        let offsets: Vec<f64> = project(&cloud, &cand, &p).iter().filter_map(|o| o.edge).map(|e| (e.p + cloud.origin).dot(out_dir)).collect();
+        let offsets: Vec<f64> = project(&cloud, &cand, None, &p).iter().filter_map(|o| o.edge).map(|e| (e.p + cloud.origin).dot(out_dir)).collect();
         (offsets.iter().sum::<f64>() / offsets.len() as f64, offsets.len(), cand.len())
     }
 
@@ -1092,7 +1294,7 @@ mod tests {
         let world: Vec<DVec3> = (0..20_000).map(|_| DVec3::new(rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), rng.range(-0.3, 0.3))).collect();
         let cloud = Cloud::new(&world);
         let candidates: Vec<u32> = (0..cloud.len() as u32).filter(|&i| (cloud.at(i as usize) + cloud.origin).length() < 0.1).collect();
-        let out = project(&cloud, &candidates, &test_params(0.1, 0.005));
+        let out = project(&cloud, &candidates, None, &test_params(0.1, 0.005));
         assert!(candidates.len() > 50);
         for r in &out {
             assert!(r.scattered && r.edge.is_none() && r.surfaces == 1, "{r:?}");
@@ -1196,7 +1398,7 @@ mod tests {
             p.y > 0.5 && p.y < 1.5 && DVec3::new(p.x - mid.x, 0.0, p.z - mid.z).length() < radius / 2.0
         };
         let cand: Vec<u32> = (0..cloud.len() as u32).filter(|&i| near(i)).collect();
-        let edges = project(&cloud, &cand, &test_params(radius, noise)).iter().filter(|o| o.edge.is_some()).count();
+        let edges = project(&cloud, &cand, None, &test_params(radius, noise)).iter().filter(|o| o.edge.is_some()).count();
         (edges, cand.len())
     }
 
@@ -1235,7 +1437,7 @@ mod tests {
                 })
                 .collect();
             let p = test_params(radius, noise);
-            let out = project(&cloud, &candidates, &p);
+            let out = project(&cloud, &candidates, None, &p);
             let split = out.iter().filter(|r| r.surfaces >= 3).count();
             assert!(split * 50 < out.len(), "seed {seed}: {split} of {} candidates found the wall split in two", out.len());
             let edges: Vec<DVec3> = out.iter().filter_map(|r| r.edge).map(|e| e.p + cloud.origin).collect();

@@ -68,6 +68,7 @@ use crate::curves::{typed, Curves, Format, Outside, Polyline, Shape};
 use crate::debug::DebugDump;
 use crate::error::{Error, Result};
 use crate::extract::candidates::{self, ResidualSum};
+use crate::extract::params::Model;
 use crate::extract::polylines;
 use crate::extract::statistics::{self, StatsTile};
 use crate::extract::{project, Counts, Params, Resolved, Timings};
@@ -1144,7 +1145,20 @@ impl<'a> Run<'a> {
                     let pts: Vec<DVec3> = cand.iter().map(|&i| cloud.at(i as usize)).collect();
                     debug.points(&format!("candidates_{t}.obj"), &pts, cloud.origin);
                 }
-                Ok(Edges(project::tile_edges(&cloud, &cand, r)))
+                let band = match r.model {
+                    Model::Patches => {
+                        // (Tiles without points have no records.)
+                        let around = grid
+                            .around(t, r.halo())
+                            .into_iter()
+                            .filter(|&u| self.manifest.tile_points[u as usize] > 0)
+                            .map(|u| Ok(records::read::<Residuals>(&self.ws, u)?.0))
+                            .collect::<Result<Vec<_>>>()?;
+                        Some(candidates::band_of(&cloud, &around, tau))
+                    }
+                    _ => None,
+                };
+                Ok(Edges(project::tile_edges(&cloud, &cand, band.as_deref(), r)))
             },
         )?;
         self.pass.projection_load = time.load;

@@ -78,22 +78,28 @@ fn a_share_of_the_points_evaluated_is_the_same_in_any_tiling() {
     }
 }
 
-/// The shared search of `--model cells` decides the same in any tiling: a noisy cube at 1 tile
-/// and at 8 and 27 gives the same curves, byte for byte (a cell's search runs over the ball
-/// around its centre, its random stream keyed by the cell, in whichever tile holds its
-/// candidates; a cell across a tile border is searched the same from either side).
+/// The shared search of `--model cells` and the surfaces-first search of `--model patches`
+/// decide the same in any tiling: a noisy cube at 1 tile and at 8 and 27 gives the same
+/// curves, byte for byte (a cell's search runs over the ball around its centre, its random
+/// stream keyed by the cell, in whichever tile holds its candidates; a cell across a tile
+/// border is searched the same from either side; the patches take the candidate flags of the
+/// halo's points from the records of the tiles whose cores hold them).
 #[test]
-fn cells_search_the_same_in_any_tiling() {
+fn cells_and_patches_search_the_same_in_any_tiling() {
+    use crease::extract::params::Model;
     let d = tempfile::tempdir().unwrap();
     let input = vec![fixture("cube_noise005.las")];
-    let params = Params { model: Some(crease::extract::params::Model::Cells), ..Params::default() };
-    let one = run_extract(&input, &d.path().join("one"), &params, &Filter::default(), &opts(Some(10.0))).unwrap();
     let balls = run_extract(&input, &d.path().join("balls"), &Params::default(), &Filter::default(), &opts(Some(10.0))).unwrap();
-    assert_ne!(one.counts.edge_points, balls.counts.edge_points, "the cells model projected as the balls model does");
-    assert!(one.counts.curves >= 12, "{} curves", one.counts.curves);
-    let curves = |run: &str| std::fs::read(d.path().join(run).join("curves.obj")).unwrap();
-    for r in same_in_smaller_tiles(d.path(), &input, &params, &one) {
-        assert_eq!(curves(&format!("t{}", r.tile_size)), curves("one"), "curves with {} tiles", r.tiles);
+    for model in [Model::Cells, Model::Patches] {
+        let dir = d.path().join(format!("{model:?}"));
+        let params = Params { model: Some(model), ..Params::default() };
+        let one = run_extract(&input, &dir.join("one"), &params, &Filter::default(), &opts(Some(10.0))).unwrap();
+        assert_ne!(one.counts.edge_points, balls.counts.edge_points, "the {model:?} model projected as the balls model does");
+        assert!(one.counts.curves >= 12, "{model:?}: {} curves", one.counts.curves);
+        let curves = |run: &str| std::fs::read(dir.join(run).join("curves.obj")).unwrap();
+        for r in same_in_smaller_tiles(&dir, &input, &params, &one) {
+            assert_eq!(curves(&format!("t{}", r.tile_size)), curves("one"), "{model:?}: curves with {} tiles", r.tiles);
+        }
     }
 }
 
