@@ -306,13 +306,29 @@ impl Balls {
     }
 }
 
-/// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells of side `side`, on
-/// the rayon pool if `idle` says that the pool has nothing else to do (the same cloud either
-/// way).
-pub fn load_cloud(store: Store, grid: &Grid, t: u32, l: &Loading, side: f64, idle: bool, cancel: &Cancel) -> Result<(Cloud, Vec<bool>)> {
-    let (tp, core) = load(store, grid, t, l)?;
-    let origin = tile_origin(&tp);
-    Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, side, idle).cancelled_by(cancel), core))
+/// How the residual and projection passes load a tile as a cloud: from `store` over `grid`,
+/// as `loading` says, gridded in cells of side `cell_side`, its queries stopped by `cancel`.
+pub struct CloudLoading<'a> {
+    /// The tile store.
+    pub store: Store<'a>,
+    /// The tile grid.
+    pub grid: &'a Grid,
+    /// The halo and thinning.
+    pub loading: Loading<'a>,
+    /// Side of the cloud's grid cells.
+    pub cell_side: f64,
+    /// Stops the cloud's queries.
+    pub cancel: &'a Cancel,
+}
+
+impl CloudLoading<'_> {
+    /// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells, on the rayon
+    /// pool if `idle` says that the pool has nothing else to do (the same cloud either way).
+    pub fn load(&self, t: u32, idle: bool) -> Result<(Cloud, Vec<bool>)> {
+        let (tp, core) = load(self.store, self.grid, t, &self.loading)?;
+        let origin = tile_origin(&tp);
+        Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, self.cell_side, idle).cancelled_by(self.cancel), core))
+    }
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@
 use super::bucket::{self, Input};
 use super::far;
 use super::manifest;
-use super::pass::{self, tile_pass, Loading};
+use super::pass::{self, tile_pass, CloudLoading, Loading};
 use super::plan::tile_size_for;
 use super::records::{self, Edges, Residuals, Stats};
 use super::state::{done, Run, Step};
@@ -156,9 +156,11 @@ impl Run<'_> {
 
     /// How the residual and projection passes load a tile: the same way in both, so that the
     /// residuals come back in the cloud's order.
-    fn cloud_loading(&self, r: &Resolved) -> Loading<'_> {
+    fn cloud_loading(&self, r: &Resolved) -> Result<CloudLoading<'_>> {
         let (halo, keep, average, average_share) = (r.halo(), r.keep, r.average, r.average_share);
-        Loading { halo, keep, evaluate: r.evaluate, seed: r.seed, key_quantum: self.kq, counts: &self.manifest.tile_points, average, average_share }
+        let loading =
+            Loading { halo, keep, evaluate: r.evaluate, seed: r.seed, key_quantum: self.kq, counts: &self.manifest.tile_points, average, average_share };
+        Ok(CloudLoading { store: Store::new(&self.ws)?, grid: &self.manifest.grid, loading, cell_side: r.cell_side(), cancel: &self.opts.cancel })
     }
 
     /// Residual pass (stage 1); returns tau, the mean residual over all points (an exact sum:
@@ -166,12 +168,12 @@ impl Run<'_> {
     fn residuals(&mut self, r: &Resolved, params: &Params) -> Result<Step<f64>> {
         let t = Instant::now();
         self.repair::<Residuals>()?;
-        let (store, grid, loading) = (Store::new(&self.ws)?, &self.manifest.grid, self.cloud_loading(r));
+        let clouds = self.cloud_loading(r)?;
         let time = tile_pass(
             &self.context(),
             "residuals",
             &self.share(),
-            |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle, &self.opts.cancel),
+            |t, idle| clouds.load(t, idle),
             |_, (cloud, core)| Ok(Residuals(candidates::tile_residuals(&cloud, &core, r))),
         )?;
         self.pass.residuals_load = time.load;
@@ -193,13 +195,13 @@ impl Run<'_> {
     fn projection(&mut self, r: &Resolved) -> Result<Step<()>> {
         let t = Instant::now();
         self.repair::<Edges>()?;
-        let (store, grid, loading, tau) = (Store::new(&self.ws)?, &self.manifest.grid, self.cloud_loading(r), self.tau);
+        let (clouds, tau) = (self.cloud_loading(r)?, self.tau);
         let debug = &self.opts.debug;
         let time = tile_pass(
             &self.context(),
             "projection",
             &self.share(),
-            |t, idle| pass::load_cloud(store, grid, t, &loading, r.cell_side(), idle, &self.opts.cancel),
+            |t, idle| clouds.load(t, idle),
             |t, (cloud, core)| {
                 let res = records::read::<Residuals>(&self.ws, t)?.0;
                 let cand = candidates::tile_candidates(&cloud, &core, &res, tau);
