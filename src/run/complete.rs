@@ -4,6 +4,7 @@
 //! groups completed, attributed, labelled and written to the working data as a [`Finished`]
 //! record before the next is gathered.
 
+use super::budgets;
 use super::recent::Recent;
 use super::records::{self, Finished, Pieces, Record, Smoothed};
 use super::state::Run;
@@ -68,8 +69,7 @@ impl Run<'_> {
         let halo = blocks::HALO_STEPS * r.step * 1.001;
         let (axis, slabs) = blocks.slabs();
         let mut sweep = Sweep::new(axis, join, 2.0 * reach * (1.0 + 1e-9) + 2.0 * merge);
-        // (A batch of about a sixteenth of the memory, at 140 bytes a vertex while completed.)
-        let budget = (self.opts.memory / 16 / 140).max(256) as usize;
+        let budget = budgets::completion_batch(self.opts.memory);
         let mut batch = Batch { traced: 0, written: 0, groups: vec![], vertices: 0 };
         let mut debug_lines = vec![];
         (counts.grown, counts.unconfirmed, counts.curves, counts.left_out) = (0, 0, 0, 0);
@@ -174,8 +174,7 @@ impl Run<'_> {
             }
         }
         let mut gathered: Vec<Gathered> = curves.iter().map(|c| Gathered::new(c.v.len())).collect();
-        // (Small: it only spares neighbouring blocks decoding the records around them again.)
-        let mut smoothed = Recent::new(self.opts.memory / 48 / 48);
+        let mut smoothed = Recent::new(budgets::smoothed_kept(self.opts.memory));
         for (b, ids) in meets.into_iter().enumerate() {
             if ids.is_empty() {
                 continue;

@@ -5,6 +5,7 @@
 //! its pieces of polylines are kept in the working data, the pieces last: they mark the block
 //! done.
 
+use super::budgets;
 use super::recent::Recent;
 use super::records::{self, Pieces, Record, Smoothed, Survey};
 use super::state::{Run, Step};
@@ -91,7 +92,7 @@ impl Run<'_> {
         let bar = self.progress.bar("curves", share.len() as u64, "blocks");
         bar.inc((share.len() - todo.len()) as u64);
         // (Neighbouring blocks read the same tiles: the last few decoded are kept.)
-        let mut tiles = Recent::new(self.opts.memory / 16 / 48);
+        let mut tiles = Recent::new(budgets::tile_edges_kept(self.opts.memory));
         // Stage 3 for block b: its smoothed, confirmed core and halo, its own edge points as
         // read (for the debug dump), and the seconds taken.
         let mut smooth = |b: u32| -> Result<(SmoothedEdges, Vec<DVec3>, Vec<DVec3>, f64)> {

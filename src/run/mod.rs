@@ -5,7 +5,7 @@
 //!
 //! 1. **Plan** ([`plan`]) from the headers (`inputs.rs`): bounds, counts, CRS, a tile grid (2D
 //!    for airborne-like extents, 3D otherwise) sized from `--memory` (a tile holds at most
-//!    [`MAX_TILE_POINTS`]).
+//!    [`MAX_TILE_POINTS`]; [`budgets`] says how the budget is shared).
 //! 2. **Bucket** (`bucket.rs`): one streaming pass over the inputs writes every point once, to
 //!    its tile, zstd-compressed in spatial chunks (16 per tile edge, each headed by its
 //!    bounding box), so that assembling a tile's halo decompresses only the neighbours' border
@@ -58,6 +58,7 @@
 //! buckets, and, once every block is grown, stitches, completes and writes the outputs.
 
 pub(crate) mod bucket;
+pub mod budgets;
 mod complete;
 mod curves;
 pub(crate) mod far;
@@ -76,11 +77,12 @@ mod tile_passes;
 mod types;
 
 pub(crate) use bucket::Input;
+pub use budgets::{BYTES_PER_POINT, MAX_TILE_POINTS, MIN_MEMORY};
 pub use layout::{write_view, OUTPUTS};
 pub use manifest::{common_crs, InputStamp, Job, Manifest};
-pub use plan::{tile_size_for, BYTES_PER_POINT, MAX_TILE_POINTS};
+pub use plan::tile_size_for;
 pub use status::{render_status, status, Status};
-pub use types::{Extraction, PassSeconds, ProjectionCost, Report, RunOptions, ShapeCounts, Worker, WorkerStep, MIN_MEMORY};
+pub use types::{Extraction, PassSeconds, ProjectionCost, Report, RunOptions, ShapeCounts, Worker, WorkerStep};
 
 use crate::curves::{Curves, Outside};
 use crate::error::{Error, Result};

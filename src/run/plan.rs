@@ -1,6 +1,7 @@
 //! The plan step: a run continues the job its directory holds, or plans it anew, a tile grid
 //! over the cloud's bounds sized from the memory budget.
 
+use super::budgets::{BYTES_PER_POINT, MAX_TILE_POINTS, MIN_TILE_POINTS};
 use super::layout::{claim_work_dir, remove_working_data, use_work_dir, OUTPUTS, VIEW, WORKING, WORK_OWNER};
 use super::manifest::{self, Job, Manifest};
 use super::state::Planned;
@@ -12,20 +13,11 @@ use crate::workspace::Workspace;
 use glam::DVec3;
 use std::path::Path;
 
-/// Bytes of memory a tile point costs while processed (points, tree, per-stage arrays, the
-/// halo share and the prefetched next tile).
-pub const BYTES_PER_POINT: u64 = 600;
-
-/// Most points a tile is planned to hold, whatever the memory allows. Each pass loads its
-/// first tile while the cores wait, and big tiles leave little to overlap: the 20 M-point
-/// scene in 2 tiles (the default budget) took 170 s; in 16 tiles, 137 s.
-pub const MAX_TILE_POINTS: u64 = 2_000_000;
-
 /// Tile edge length for a budget: tiles hold about `memory / BYTES_PER_POINT` points (at most
-/// [`MAX_TILE_POINTS`]), assuming the points spread evenly over the footprint (2D) or the
+/// [`MAX_TILE_POINTS`], at least [`MIN_TILE_POINTS`]), assuming the points spread evenly over the footprint (2D) or the
 /// volume (3D) of the bounds.
 pub fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
-    let per_tile = (memory / BYTES_PER_POINT).clamp(10_000, MAX_TILE_POINTS) as f64;
+    let per_tile = (memory / BYTES_PER_POINT).clamp(MIN_TILE_POINTS, MAX_TILE_POINTS) as f64;
     let ext = DVec3::from(b.max) - DVec3::from(b.min);
     let ext = ext.max(DVec3::splat(1e-9));
     let tiles = (points as f64 / per_tile).max(1.0);

@@ -3,6 +3,7 @@
 //! halo.
 
 use super::bucket::{self, Input};
+use super::budgets;
 use super::far;
 use super::manifest;
 use super::pass::{self, tile_pass, CloudLoading, Loading};
@@ -62,7 +63,7 @@ impl Run<'_> {
             let store = Store::new(&self.ws)?;
             store.clear()?;
             let grid = self.manifest.grid.clone();
-            let tiles = Bucketer::new(&grid, store, (self.opts.memory / 4 / 48) as usize);
+            let tiles = Bucketer::new(&grid, store, budgets::bucket_buffer(self.opts.memory));
             let mut sink = bucket::Sink { tiles, spread: far::Spread::new(&grid.span()), kept: self.manifest.kept, far: 0 };
             let bar = self.progress.bar("bucketing", self.manifest.declared_points, "points");
             bucket::bucket(input, &mut sink, &bar, &self.opts.cancel)?;

@@ -2,6 +2,7 @@
 //! [`RunOptions::validate`]), the worker a process is ([`Worker`]) and what an invocation got
 //! done ([`WorkerStep`]), and what a run reports ([`Report`], [`Extraction`]).
 
+use super::budgets::MIN_MEMORY;
 use crate::cancel::Cancel;
 use crate::curves::{Curves, Format, Outside, Polyline, Shape};
 use crate::debug::DebugDump;
@@ -79,10 +80,6 @@ impl Default for RunOptions {
         }
     }
 }
-
-/// The smallest memory budget a run takes: room for a tile of a few thousand points and a
-/// batch of curves (the tests' smallest fixtures run in 0.6 MB, batched).
-pub const MIN_MEMORY: u64 = 512 << 10;
 
 impl RunOptions {
     /// Checks the options, with the message the command line shows for each: a memory budget
