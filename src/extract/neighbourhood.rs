@@ -724,7 +724,7 @@ pub struct Thinned<'a> {
 
 /// The hash of a point's global id by which [`Thinned`] thins a cloud.
 fn thinning_hash(gid: u64) -> u64 {
-    crate::rng::Rng::new(gid ^ 0x6E01_5EBA).next_u64()
+    crate::rng::Rng::new(gid ^ crate::salts::THINNED_LEVEL).next_u64()
 }
 
 /// Fewest points a level of [`Thinned`] holds.

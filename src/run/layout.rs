@@ -10,6 +10,7 @@ use crate::error::{Error, Result};
 use crate::extract::Resolved;
 use crate::keys::{keep_point, key_quantum, position_key};
 use crate::points::{Crs, TilePoints};
+use crate::salts;
 use crate::tiles::Store;
 use crate::workspace::Workspace;
 use glam::DVec3;
@@ -91,7 +92,7 @@ fn sample_tiles(ws: &Workspace, manifest: &Manifest, tiles: &[u32], points: f64)
         .par_iter()
         .map(|&t| {
             let mut tp = TilePoints::default();
-            store.read(t, &mut tp, |p, _| keep_point(position_key(p, kq) ^ 0x9E37_79B9, share, 1))?;
+            store.read(t, &mut tp, |p, _| keep_point(position_key(p, kq) ^ salts::PREVIEW_SAMPLE, share, 1))?;
             Ok(tp.xyz)
         })
         .collect::<Result<_>>()?;

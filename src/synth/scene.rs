@@ -172,7 +172,7 @@ fn block(i: usize, j: usize, seed: u64, g: usize, clutter: bool) -> Block {
     }
     if clutter {
         // (From a stream of its own, so that the rest of the block is the scene without clutter.)
-        s.extend(clutter_of(o, Rng::stream(seed ^ 0xC1A7, (j * g + i) as u64)));
+        s.extend(clutter_of(o, Rng::stream(seed ^ crate::salts::SCENE_CLUTTER, (j * g + i) as u64)));
     }
     Block { surfaces: s, truth: t }
 }
