@@ -1,4 +1,4 @@
-//! Stage 3 for one growth block (see [`blocks`]): the edge points near the block sorted into
+//! Stage 3 for one growth block (see [`super::blocks`]): the edge points near the block sorted into
 //! its own, those of its growing halo ("around") and the smoothing's context beyond, then
 //! smoothed and confirmed (see [`polylines::smooth_and_confirm`]) and split into the block's
 //! core, which it grows from, and its halo, which it grows on through. Positions are relative

@@ -23,7 +23,7 @@
 //!
 //! A run in progress is a `Run` (`state.rs`); each step comes to a `Step`, done or waiting
 //! for other workers. Per-tile and per-block results are records of the codec (`records.rs`);
-//! `crease status` reads them ([`status`]).
+//! `crease status` reads them ([`status()`]).
 //!
 //! Run directory layout:
 //! - `manifest.json`: the job (inputs with size, mtime and header checksum; parameters; crease

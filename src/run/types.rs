@@ -147,7 +147,7 @@ impl std::str::FromStr for Worker {
     }
 }
 
-/// What one invocation of a worker got done (see [`run_worker`]).
+/// What one invocation of a worker got done (see [`super::run_worker`]).
 #[derive(Clone, Debug)]
 pub enum WorkerStep {
     /// The run finished here: its outputs are written.
