@@ -54,11 +54,6 @@ impl<'a> BlockContext<'a> {
     pub fn region(&self, b: u32) -> (DVec3, DVec3) {
         self.blocks.list[b as usize].around(self.reach)
     }
-
-    /// The origin of the positions.
-    pub fn origin(&self) -> DVec3 {
-        self.origin
-    }
 }
 
 /// Sorts `edges` (world positions; those outside block `b`'s region are passed over) into the
@@ -111,4 +106,44 @@ pub fn smooth_core(cx: &BlockContext, b: u32, edges: BlockEdges) -> (SmoothedEdg
     core.sort();
     halo.sort();
     (core, halo)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::extract::blocks::{plan, Census, BASE_STEPS};
+    use crate::extract::params::Params;
+    use glam::Vec3;
+
+    /// Edge points along a line through two blocks: block 0 owns those in its box, its halo
+    /// takes those within the growing halo past its border, the context those beyond it within
+    /// the reach, and points farther are passed over; smoothed, a clean line keeps every point,
+    /// its core points in the block and its halo points past it, on the line.
+    #[test]
+    fn a_blocks_edge_points_are_sorted_by_how_far_past_it_they_lie() {
+        let r = Params::default().resolve(1.0, 0.0);
+        let side = BASE_STEPS * r.step;
+        let mut census = Census::new(side);
+        let (y, z) = (0.5 * side, 0.5 * side);
+        [DVec3::new(1.0, y, z), DVec3::new(side + 1.0, y, z)].into_iter().for_each(|p| census.add(p));
+        let blocks = plan(&census);
+        assert_eq!(blocks.list.len(), 2);
+        let grouped = vec![];
+        let origin = DVec3::new(1e5, -2e5, 30.0);
+        let cx = BlockContext::new(&blocks, origin, &grouped, &r);
+        let edges: Vec<WorldEdge> =
+            (0..(4.0 * side / r.kappa) as usize).map(|k| WorldEdge { p: origin + DVec3::new(k as f64 * r.kappa, y, z), n: [Vec3::Y, Vec3::Z] }).collect();
+        let sorted = sort_edges(&cx, 0, edges.iter().rev());
+        let (halo, reach) = (cx.halo, cx.reach);
+        let count = |f: &dyn Fn(f64) -> bool| edges.iter().filter(|e| f(e.p.x - origin.x)).count();
+        assert_eq!(sorted.own.points.len(), count(&|x| x < side));
+        assert_eq!(sorted.around.points.len(), count(&|x| x >= side && x <= side + halo));
+        assert_eq!(sorted.context.points.len(), count(&|x| x > side + halo && x <= side + reach));
+        assert!(sorted.own.points.windows(2).all(|w| w[0].x < w[1].x), "in the order of their positions");
+        let (n_own, n_around) = (sorted.own.points.len(), sorted.around.points.len());
+        let (core, halo_points) = smooth_core(&cx, 0, sorted);
+        assert_eq!((core.points.len(), halo_points.points.len(), core.unconfirmed), (n_own, n_around, 0));
+        assert!(core.points.iter().chain(&halo_points.points).all(|p| (p.y - y).abs() < 1e-6 && (p.z - z).abs() < 1e-6));
+        assert!(core.points.iter().all(|p| p.x < side) && halo_points.points.iter().all(|p| p.x >= side));
+    }
 }
