@@ -44,7 +44,7 @@ pub fn keep_point(id: u64, keep: f64, seed: u64) -> bool {
     if keep >= 1.0 {
         return true;
     }
-    let mut r = Rng::stream(seed ^ 0x7417, id);
+    let mut r = Rng::stream(seed ^ crate::salts::KEEP_POINT, id);
     r.f64() < keep
 }
 

@@ -20,7 +20,7 @@
 //!
 //! Shared mechanics, below all of those (each imports at most [`error`] and the ones listed
 //! before it): [`points`] (plain cloud data types), [`rng`] (the keyed random stream), `keys`
-//! (position keys, hashing, snapping), `grid` (cells of a uniform grid), `sets` (union-find),
+//! (position keys, hashing, snapping), `salts` (of the keyed random choices), `grid` (cells of a uniform grid), `sets` (union-find),
 //! [`spatial`] (the k-d tree), [`spacing`], `codec` (the record format of a run directory),
 //! `workspace` (a run directory or memory), [`cancel`], [`progress`], [`mem`]; and [`debug`]
 //! (intermediate point sets, written with the [`curves`] writer).
@@ -44,6 +44,7 @@ pub mod preview;
 pub mod progress;
 pub mod rng;
 pub mod run;
+pub(crate) mod salts;
 pub(crate) mod sets;
 pub mod slurm;
 pub mod spacing;

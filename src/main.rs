@@ -616,143 +616,146 @@ fn slurm_cmd(a: SlurmArgs) -> Result<(), Error> {
 }
 
 fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
-    let ExtractArgs {
-        recursive,
-        format,
-        json,
-        paths,
-        out,
-        filter,
-        params,
-        threads,
-        memory,
-        tile_size,
-        force,
-        per_file,
-        work_dir,
-        worker,
-        clean,
-        quiet,
-        block_steps,
-        debug_dir,
-        min_confidence,
-        min_length,
-        a_srs,
-        outside,
-    } = a;
-    if let Some(n) = threads {
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        if n > MAX_THREADS_PER_CORE * cores {
-            return Err(Error::Usage(format!("--threads {n}: at most {} on this machine ({MAX_THREADS_PER_CORE} a core)", MAX_THREADS_PER_CORE * cores)));
-        }
-        rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))?;
+    if let Some(n) = a.threads {
+        set_threads(n)?;
     }
-    if out.as_os_str() == "-" {
+    if a.out.as_os_str() == "-" {
         return Err(Error::Usage(
             "-o -: crease writes a run directory of several files, not a stream; name a directory (use --json for a summary on stdout)".into(),
         ));
     }
+    let opts = run_options(&a);
+    opts.validate()?;
+    let params = a.params.params()?;
+    let mut summaries = vec![];
+    for (inputs, dir, work_dir) in extract_jobs(&a)? {
+        let opts = crease::run::RunOptions { work_dir, ..opts.clone() };
+        let r = match a.worker {
+            None => crease::run::run_extract(&inputs, &dir, &params, &a.filter.filter()?, &opts)?,
+            Some(w) => match crease::run::run_worker(&inputs, &dir, &params, &a.filter.filter()?, &opts, w)? {
+                crease::run::WorkerStep::Finished(r) => *r,
+                crease::run::WorkerStep::Waiting(what) => {
+                    summaries.extend(worker_stopped(&a, &dir, w, Some(what)));
+                    continue;
+                }
+                crease::run::WorkerStep::AlreadyFinished => {
+                    summaries.extend(worker_stopped(&a, &dir, w, None));
+                    continue;
+                }
+            },
+        };
+        if a.json {
+            let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).filter(|f| f.is_file()).collect();
+            summaries.push(serde_json::json!({"dir": dir, "outputs": outputs, "report": r}));
+        }
+        if !a.quiet {
+            eprintln!("{}", run_summary(&r, &dir));
+        }
+    }
+    if a.json {
+        // One object for one run; an array with --per-file.
+        let v = if a.per_file { serde_json::Value::Array(summaries) } else { summaries.pop().unwrap_or_default() };
+        println!("{}", serde_json::to_string_pretty(&v).expect("summary serialises"));
+    }
+    Ok(())
+}
+
+/// `--threads n`: the size of rayon's global pool, at most [`MAX_THREADS_PER_CORE`] a core.
+fn set_threads(n: usize) -> Result<(), Error> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if n > MAX_THREADS_PER_CORE * cores {
+        return Err(Error::Usage(format!("--threads {n}: at most {} on this machine ({MAX_THREADS_PER_CORE} a core)", MAX_THREADS_PER_CORE * cores)));
+    }
+    rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))
+}
+
+/// The run options `crease extract` gives, with Ctrl-C (and SIGTERM) cancelling the run.
+fn run_options(a: &ExtractArgs) -> crease::run::RunOptions {
     let cancel = crease::cancel::Cancel::default();
     let _ = ctrlc::set_handler({
         let cancel = cancel.clone();
         move || cancel.set()
     });
     let defaults = crease::run::RunOptions::default();
-    let opts = crease::run::RunOptions {
-        memory: memory.unwrap_or(defaults.memory),
-        tile_size,
-        force,
-        progress: if quiet { crease::progress::Mode::Quiet } else { crease::progress::Mode::Auto },
+    crease::run::RunOptions {
+        memory: a.memory.unwrap_or(defaults.memory),
+        tile_size: a.tile_size,
+        force: a.force,
+        progress: if a.quiet { crease::progress::Mode::Quiet } else { crease::progress::Mode::Auto },
         cancel,
-        debug: crease::debug::DebugDump::new(debug_dir.or_else(|| std::env::var_os("CREASE_DEBUG_DIR").map(PathBuf::from))),
-        min_confidence,
-        min_length,
+        debug: crease::debug::DebugDump::new(a.debug_dir.clone().or_else(|| std::env::var_os("CREASE_DEBUG_DIR").map(PathBuf::from))),
+        min_confidence: a.min_confidence,
+        min_length: a.min_length,
         warn,
-        assign_crs: a_srs.map(|c| *c),
-        outside,
-        recursive,
-        formats: format,
+        assign_crs: a.a_srs.as_deref().cloned(),
+        outside: a.outside.clone(),
+        recursive: a.recursive,
+        formats: a.format.clone(),
         work_dir: None,
-        clean,
-        block_steps,
-    };
-    opts.validate()?;
-    let params = params.params()?;
-    let jobs: Vec<(Vec<PathBuf>, PathBuf, Option<PathBuf>)> = if per_file {
-        input_files(&paths, recursive)?
-            .into_iter()
-            .map(|f| {
-                let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-                let work = work_dir.as_ref().map(|w| w.join(&stem));
-                (vec![f], out.join(stem), work)
-            })
-            .collect()
-    } else {
-        vec![(paths, out, work_dir)]
-    };
-    let mut summaries = vec![];
-    for (inputs, dir, work_dir) in jobs {
-        let opts = crease::run::RunOptions { work_dir, ..opts.clone() };
-        let r = match worker {
-            None => crease::run::run_extract(&inputs, &dir, &params, &filter.filter()?, &opts)?,
-            Some(w) => match crease::run::run_worker(&inputs, &dir, &params, &filter.filter()?, &opts, w)? {
-                crease::run::WorkerStep::Finished(r) => *r,
-                crease::run::WorkerStep::Waiting(what) => {
-                    if !quiet {
-                        eprintln!(
-                            "worker {}/{}: its share is done as far as it goes; waiting for {what}: run it again to go on ({})",
-                            w.index,
-                            w.count,
-                            dir.display()
-                        );
-                    }
-                    if json {
-                        summaries.push(serde_json::json!({"dir": dir, "worker": format!("{}/{}", w.index, w.count), "waiting": what}));
-                    }
-                    continue;
-                }
-                crease::run::WorkerStep::AlreadyFinished => {
-                    if !quiet {
-                        eprintln!("worker {}/{}: the run is finished; its outputs are in {}", w.index, w.count, dir.display());
-                    }
-                    if json {
-                        summaries.push(serde_json::json!({"dir": dir, "worker": format!("{}/{}", w.index, w.count), "finished": true}));
-                    }
-                    continue;
-                }
-            },
-        };
-        if json {
-            let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).filter(|f| f.is_file()).collect();
-            summaries.push(serde_json::json!({"dir": dir, "outputs": outputs, "report": r}));
-        }
-        if !quiet {
-            let shapes = match r.outside {
-                crease::curves::Outside::Unknown => String::new(),
-                _ => format!(" ({} convex, {} concave)", r.shapes.convex, r.shapes.concave),
-            };
-            eprintln!(
-                "{} curves{shapes} from {} points in {:.2} s ({} tiles{}; kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
-                r.counts.curves,
-                r.counts.points,
-                r.total_seconds,
-                r.tiles,
-                if r.resumed { ", resumed" } else { "" },
-                r.params.kappa,
-                r.tau,
-                r.counts.candidates,
-                r.counts.edge_points,
-                r.counts.corners,
-                dir.display()
-            );
-        }
+        clean: a.clean,
+        block_steps: a.block_steps,
     }
-    if json {
-        // One object for one run; an array with --per-file.
-        let v = if per_file { serde_json::Value::Array(summaries) } else { summaries.pop().unwrap_or_default() };
-        println!("{}", serde_json::to_string_pretty(&v).expect("summary serialises"));
+}
+
+/// One run of `crease extract`: its inputs, its run directory and its work directory, if any.
+type ExtractJob = (Vec<PathBuf>, PathBuf, Option<PathBuf>);
+
+/// The runs `crease extract` makes: one, or one a file with `--per-file`.
+fn extract_jobs(a: &ExtractArgs) -> Result<Vec<ExtractJob>, Error> {
+    if !a.per_file {
+        return Ok(vec![(a.paths.clone(), a.out.clone(), a.work_dir.clone())]);
     }
-    Ok(())
+    Ok(input_files(&a.paths, a.recursive)?
+        .into_iter()
+        .map(|f| {
+            let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            let work = a.work_dir.as_ref().map(|w| w.join(&stem));
+            (vec![f], a.out.join(stem), work)
+        })
+        .collect())
+}
+
+/// What a worker that did not write the outputs says, `waiting` for what it waits for or None
+/// if the run had finished: on stderr unless quiet, and as the JSON summary of its run with
+/// `--json`.
+fn worker_stopped(a: &ExtractArgs, dir: &Path, w: crease::run::Worker, waiting: Option<String>) -> Option<serde_json::Value> {
+    let worker = format!("{}/{}", w.index, w.count);
+    let (said, summary) = match waiting {
+        Some(what) => (
+            format!("worker {worker}: its share is done as far as it goes; waiting for {what}: run it again to go on ({})", dir.display()),
+            serde_json::json!({"dir": dir, "worker": worker, "waiting": what}),
+        ),
+        None => (
+            format!("worker {worker}: the run is finished; its outputs are in {}", dir.display()),
+            serde_json::json!({"dir": dir, "worker": worker, "finished": true}),
+        ),
+    };
+    if !a.quiet {
+        eprintln!("{said}");
+    }
+    a.json.then_some(summary)
+}
+
+/// The line `crease extract` prints for a finished run.
+fn run_summary(r: &crease::run::Report, dir: &Path) -> String {
+    let shapes = match r.outside {
+        crease::curves::Outside::Unknown => String::new(),
+        _ => format!(" ({} convex, {} concave)", r.shapes.convex, r.shapes.concave),
+    };
+    format!(
+        "{} curves{shapes} from {} points in {:.2} s ({} tiles{}; kappa {:.4}, tau {:.4}, {} candidates, {} edge points, {} corners); outputs in {}",
+        r.counts.curves,
+        r.counts.points,
+        r.total_seconds,
+        r.tiles,
+        if r.resumed { ", resumed" } else { "" },
+        r.params.kappa,
+        r.tau,
+        r.counts.candidates,
+        r.counts.edge_points,
+        r.counts.corners,
+        dir.display()
+    )
 }
 
 fn synth_cmd(what: SynthCmd) -> Result<(), Error> {

@@ -127,15 +127,26 @@ pub fn complete(mut curves: Vec<Curve>, corners: &[DVec3], p: &CompleteParams, c
     curves
 }
 
-fn in_cone(x: DVec3, t: DVec3, q: DVec3, cos: f64) -> bool {
-    let d = q - x;
-    d.dot(t) >= cos * d.length()
+/// The cone an end looks into: from its position `x` along its tangent `t`, `cos` the cosine
+/// of its half-angle.
+#[derive(Clone, Copy)]
+struct Cone {
+    x: DVec3,
+    t: DVec3,
+    cos: f64,
 }
 
-/// True if end `e` of curve `c` (at `x`, tangent `t`) reaches `q`: within its cone, or within
+impl Cone {
+    fn holds(&self, q: DVec3) -> bool {
+        let d = q - self.x;
+        d.dot(self.t) >= self.cos * d.length()
+    }
+}
+
+/// True if end `e` of curve `c` (looking into `cone`) reaches `q`: within its cone, or within
 /// `near` and not behind it (see [`behind`]).
-fn reaches(c: &Curve, e: usize, x: DVec3, t: DVec3, q: DVec3, cos: f64, near: f64) -> bool {
-    in_cone(x, t, q, cos) || q.distance(x) <= near && !behind(c, e, q)
+fn reaches(c: &Curve, e: usize, cone: Cone, q: DVec3, near: f64) -> bool {
+    cone.holds(q) || q.distance(cone.x) <= near && !behind(c, e, q)
 }
 
 /// True if `q` is nearer the other end of curve `c` than its end `e`. An end takes a corner or
@@ -167,7 +178,7 @@ fn attach_corners(curves: &mut [Curve], corners: &[DVec3], p: &CompleteParams) {
             let mut best: Option<(f64, usize)> = None;
             grid.near(x, look, |k| {
                 let d = corners[k].distance(x);
-                if d <= look && reaches(c, e, x, t, corners[k], cos, p.step) && best.is_none_or(|b| (d, k) < b) {
+                if d <= look && reaches(c, e, Cone { x, t, cos }, corners[k], p.step) && best.is_none_or(|b| (d, k) < b) {
                     best = Some((d, k));
                 }
             });
@@ -293,7 +304,7 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams, cancel: &crate
                     }
                     let q = c.v[vi];
                     let d = q.distance(x);
-                    if d > look || d == 0.0 || !reaches(&curves[ci], e, x, t, q, cos, p.step) {
+                    if d > look || d == 0.0 || !reaches(&curves[ci], e, Cone { x, t, cos }, q, p.step) {
                         return;
                     }
                     if best.is_none_or(|b| (d, cj, vi) < b) {
@@ -302,7 +313,7 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams, cancel: &crate
                 });
                 let Some((_, cj, vi)) = best else { continue };
                 let before = curves.len();
-                if act(curves, ci, e, cj, vi, cos, reach) {
+                if act(curves, (ci, e), (cj, vi), cos, reach) {
                     for k in [ci, cj].into_iter().chain(before..curves.len()) {
                         index.update(curves, k);
                     }
@@ -322,8 +333,9 @@ fn resolve_free_ends(curves: &mut Vec<Curve>, p: &CompleteParams, cancel: &crate
     curves.retain(|c| !c.v.is_empty());
 }
 
-/// Connects end `e` of curve `ci` to vertex `vi` of curve `cj`. Returns true if curves changed.
-fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: f64, reach: f64) -> bool {
+/// Connects end `e` of curve `ci` to vertex `vi` of curve `cj`, looking as far as `reach`
+/// within the cone of cosine `cos`. Returns true if curves changed.
+fn act(curves: &mut Vec<Curve>, (ci, e): (usize, usize), (cj, vi): (usize, usize), cos: f64, reach: f64) -> bool {
     let (x, t, _) = curves[ci].end(e);
     let target = &curves[cj];
     let last = target.v.len() - 1;
@@ -369,7 +381,7 @@ fn act(curves: &mut Vec<Curve>, ci: usize, e: usize, cj: usize, vi: usize, cos: 
             if target.corner[end_index] || (ci == cj && te == e) {
                 return false;
             }
-            return act(curves, ci, e, cj, end_index, cos, reach);
+            return act(curves, (ci, e), (cj, end_index), cos, reach);
         }
     }
     // Interior vertex: split there and make it a corner.

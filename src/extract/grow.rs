@@ -116,7 +116,7 @@ fn trace(points: &[DVec3], index: &Index, consumed: &mut [bool], mut x: DVec3, d
         let mut h = p.step;
         let mut taken = None;
         while h >= p.step * MIN_STEP_SHARE * 0.999 {
-            let Some((vc, far)) = ahead(points, consumed, &nn, x, vg, h, h < p.step) else { break };
+            let Some((vc, far)) = ahead(&Around { points, consumed, nn: &nn }, x, vg, h, h < p.step) else { break };
             // (A shorter step may instead follow the last step's direction, if it turns on
             // the way the curve has been turning: a bend whose running direction lags.)
             let bend = |d: DVec3| vc.dot(d) >= cos_max && vg.cross(d).dot(d.cross(vc)) > 0.0;
@@ -174,10 +174,19 @@ fn trace(points: &[DVec3], index: &Index, consumed: &mut [bool], mut x: DVec3, d
 /// The shortest step [`trace`] tries, as a share of s_max.
 const MIN_STEP_SHARE: f64 = 0.25;
 
+/// The points around a vertex as a step from it sees them: all the points, which of them are
+/// consumed, and the numbers of those within s_max of the vertex (`nn`).
+struct Around<'a> {
+    points: &'a [DVec3],
+    consumed: &'a [bool],
+    nn: &'a [(u32, f32)],
+}
+
 /// The step direction v_c from `x` towards the unconsumed points ahead (along `vg`) within `h`
-/// of it (`nn`: the points within s_max; `cut` if h is shorter), each weighted by its distance
-/// along, and the farthest of them along; `None` if none lies ahead.
-fn ahead(points: &[DVec3], consumed: &[bool], nn: &[(u32, f32)], x: DVec3, vg: DVec3, h: f64, cut: bool) -> Option<(DVec3, f64)> {
+/// of it (those `around` it within s_max; `cut` if h is shorter), each weighted by its
+/// distance along, and the farthest of them along; `None` if none lies ahead.
+fn ahead(around: &Around, x: DVec3, vg: DVec3, h: f64, cut: bool) -> Option<(DVec3, f64)> {
+    let Around { points, consumed, nn } = *around;
     let h2 = h * h;
     let mut vc = DVec3::ZERO;
     let mut far: Option<f64> = None;

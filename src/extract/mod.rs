@@ -7,7 +7,7 @@
 //! | defaults from them | [`params`] | |
 //! | 1. candidates (MLS residual) | [`candidates`] | [`candidates::tile_residuals`], [`candidates::tile_candidates`] |
 //! | 2. robust projection, corners | [`project`] | [`project::tile_edges`] |
-//! | 3. smoothing, consensus filter | [`smooth`], [`consensus`] | [`polylines::smooth_and_confirm`] (per growth block, [`blocks`]) |
+//! | 3. smoothing, consensus filter | [`smooth`], [`consensus`] | [`block_edges::sort_edges`], [`block_edges::smooth_core`] (per growth block, [`blocks`]) |
 //! | 4. growing | [`grow`] | [`polylines::grow_block`], then [`stitch`] |
 //! | 5. completion | [`complete`] | per group of polylines that can act on each other ([`groups`]) |
 //!
@@ -33,6 +33,7 @@
 //! [`neighbourhood`] holds a tile's points indexed for neighbour queries, [`fit`] the small
 //! fits every stage uses. The pipeline that runs the stages over tiles is [`crate::run`].
 
+pub mod block_edges;
 pub mod blocks;
 pub mod candidates;
 pub mod complete;

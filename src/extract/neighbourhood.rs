@@ -438,13 +438,7 @@ impl Cloud {
         }
         let order = self.block_order(at, r);
         let in_order = order.windows(2).all(|w| w[0].1 < w[1].1);
-        let mut blocks: Vec<&[(u64, u32)]> = Vec::new();
-        let mut rest = &order[..];
-        while !rest.is_empty() {
-            let n = rest.iter().take(MAX_BLOCK).take_while(|o| o.0 == rest[0].0).count();
-            blocks.push(&rest[..n]);
-            rest = &rest[n..];
-        }
+        let blocks = split_blocks(&order);
         let mut done: Vec<(u32, T)> = blocks
             .par_iter()
             .map_init(
@@ -453,8 +447,7 @@ impl Cloud {
                     if self.cancel.as_ref().is_some_and(|c| c.is_set()) {
                         return chunk.iter().map(|&(_, k)| (k, T::default())).collect::<Vec<_>>();
                     }
-                    let c = chunk.iter().map(|o| at[o.1 as usize]).sum::<DVec3>() / chunk.len() as f64;
-                    let b = chunk.iter().map(|o| at[o.1 as usize].distance(c)).fold(0.0, f64::max);
+                    let (c, b) = centre_and_radius(chunk, at);
                     // (A grid holds every block's points; a tree query for a wide block would
                     // return too long a list.)
                     let blocked = self.cells.is_some() || b <= BLOCK_CELL * r;
@@ -510,6 +503,25 @@ impl Cloud {
         }
         done.into_iter().map(|d| d.1).collect()
     }
+}
+
+/// The blocks of [`Cloud::map_neighbourhoods_at`]: runs of `order` (cell, position) in one
+/// cell, at most [`MAX_BLOCK`] positions each.
+fn split_blocks(order: &[(u64, u32)]) -> Vec<&[(u64, u32)]> {
+    let mut blocks = Vec::new();
+    let mut rest = order;
+    while !rest.is_empty() {
+        let n = rest.iter().take(MAX_BLOCK).take_while(|o| o.0 == rest[0].0).count();
+        blocks.push(&rest[..n]);
+        rest = &rest[n..];
+    }
+    blocks
+}
+
+/// The mean of the positions of a block (numbers into `at`) and their largest distance from it.
+fn centre_and_radius(block: &[(u64, u32)], at: &[DVec3]) -> (DVec3, f64) {
+    let c = block.iter().map(|o| at[o.1 as usize]).sum::<DVec3>() / block.len() as f64;
+    (c, block.iter().map(|o| at[o.1 as usize].distance(c)).fold(0.0, f64::max))
 }
 
 /// A grid of cubic cells over a cloud's local coordinates (which are non-negative): the
@@ -712,7 +724,7 @@ pub struct Thinned<'a> {
 
 /// The hash of a point's global id by which [`Thinned`] thins a cloud.
 fn thinning_hash(gid: u64) -> u64 {
-    crate::rng::Rng::new(gid ^ 0x6E01_5EBA).next_u64()
+    crate::rng::Rng::new(gid ^ crate::salts::THINNED_LEVEL).next_u64()
 }
 
 /// Fewest points a level of [`Thinned`] holds.

@@ -13,7 +13,7 @@
 //!
 //! The search runs over each candidate's own ball ([`Model::Balls`], the default), or is shared
 //! ([`Model::Cells`]): candidates are grouped in cells a quarter of the neighbourhood radius
-//! wide (see [`CELL_SHARE`]), and one search over the ball around each cell's centre gives the
+//! wide (see `CELL_SHARE`), and one search over the ball around each cell's centre gives the
 //! surfaces that all its candidates are projected onto. Noise widens the band of candidates
 //! along a feature, not the number of cells it crosses, so the cost of the shared search grows
 //! with the length of the features rather than with the candidates; but one search decides

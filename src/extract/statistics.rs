@@ -45,7 +45,7 @@ pub struct PointStats {
 /// True if the point with key `key` is one of the statistics sample in a cloud of `total`
 /// points.
 pub fn stat_sample(key: u64, total: u64, seed: u64) -> bool {
-    keep_point(key ^ 0x5A5A_5A5A, STAT_SAMPLES / total.max(1) as f64, seed)
+    keep_point(key ^ crate::salts::STATISTICS_SAMPLE, STAT_SAMPLES / total.max(1) as f64, seed)
 }
 
 /// The noise is measured over a ball at least this many of its deviations wide (see

@@ -220,14 +220,16 @@ fn check_laz(path: &Path, bytes: &[u8], header: &las::Header, data_start: u64, r
         })
         .sum();
     if layer_words > 0 {
-        check_layers(path, bytes, d, data_start, table_at, record_len, layer_words)?;
+        check_layers(path, bytes, d, data_start..table_at, record_len, layer_words)?;
     }
     Ok(())
 }
 
-/// Checks that the layers each chunk declares fit in the chunk (see [`check_laz`]). A chunk
-/// opens with its first point, raw, the number of points, and one size per layer.
-fn check_layers(path: &Path, bytes: &[u8], vlr: &[u8], data_start: u64, table_at: u64, record_len: usize, words: usize) -> Result<()> {
+/// Checks that the layers each chunk declares fit in the chunk (see [`check_laz`]), the chunks
+/// lying in `points` (from the points' start to the chunk table). A chunk opens with its first
+/// point, raw, the number of points, and one size per layer.
+fn check_layers(path: &Path, bytes: &[u8], vlr: &[u8], points: std::ops::Range<u64>, record_len: usize, words: usize) -> Result<()> {
+    let (data_start, table_at) = (points.start, points.end);
     let bad = |what: String| Error::input(path, format!("corrupt compressed point data: {what}"));
     let vlr = laz::LazVlr::from_buffer(vlr).map_err(|e| bad(format!("unreadable laszip record ({e})")))?;
     let mut src = Cursor::new(bytes);

@@ -77,7 +77,7 @@ pub struct Manifest {
     #[serde(default)]
     pub cleaned: bool,
     /// The bounds of the cloud without its far points, once bucketing found some (see
-    /// [`super::far`]): the grid is planned over them and the points outside are left out.
+    /// `run/far.rs`): the grid is planned over them and the points outside are left out.
     #[serde(default)]
     pub kept: Option<crate::points::Bounds>,
     /// Points left out as far from all the others.

@@ -9,6 +9,7 @@ use crate::extract::statistics::tile_origin;
 use crate::keys::{keep_point, position_key};
 use crate::points::TilePoints;
 use crate::progress::Progress;
+use crate::salts;
 use crate::tiles::{within, Grid, Store};
 use crate::workspace::Workspace;
 use glam::DVec3;
@@ -131,7 +132,7 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
     let reach = if averaged { halo + l.average } else { halo };
     let kept = |key| keep >= 1.0 || keep_point(key, keep, l.seed);
     // (A key of its own, so that the points averaged over do not follow those kept.)
-    let member = |key: u64| averaged && (l.average_share >= 1.0 || keep_point(key ^ 0xA7E4_6E5A, l.average_share, l.seed));
+    let member = |key: u64| averaged && (l.average_share >= 1.0 || keep_point(key ^ salts::AVERAGED, l.average_share, l.seed));
     // (An unthinned cloud reads every point without hashing its position.)
     let read = |p| {
         keep >= 1.0 || {
@@ -158,7 +159,7 @@ pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoint
     let own = drop_duplicates(&mut tp, own);
     let is_core = |k: usize, p: DVec3| {
         // (A key of its own, so that which points are evaluated does not follow which are kept.)
-        own.contains(&k) && (l.evaluate >= 1.0 || keep_point(position_key(p, l.key_quantum) ^ 0xE7A1_0A7E, l.evaluate, l.seed))
+        own.contains(&k) && (l.evaluate >= 1.0 || keep_point(position_key(p, l.key_quantum) ^ salts::EVALUATED, l.evaluate, l.seed))
     };
     if !averaged {
         let flags = tp.xyz.iter().enumerate().map(|(k, &p)| is_core(k, p)).collect();
@@ -197,6 +198,8 @@ fn drop_duplicates(tp: &mut TilePoints, own: std::ops::Range<usize>) -> std::ops
         .par_iter()
         .map(|&p| {
             let [x, y, z] = bits(p);
+            // (The golden ratio and two of xxHash64's primes: odd multipliers with well-mixed
+            // bits, so that nearby positions hash far apart.)
             let h = x.wrapping_mul(0x9E37_79B9_7F4A_7C15)
                 ^ y.rotate_left(21).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
                 ^ z.rotate_left(42).wrapping_mul(0x1656_67B1_9E37_79F9);
@@ -306,13 +309,29 @@ impl Balls {
     }
 }
 
-/// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells of side `side`, on
-/// the rayon pool if `idle` says that the pool has nothing else to do (the same cloud either
-/// way).
-pub fn load_cloud(store: Store, grid: &Grid, t: u32, l: &Loading, side: f64, idle: bool, cancel: &Cancel) -> Result<(Cloud, Vec<bool>)> {
-    let (tp, core) = load(store, grid, t, l)?;
-    let origin = tile_origin(&tp);
-    Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, side, idle).cancelled_by(cancel), core))
+/// How the residual and projection passes load a tile as a cloud: from `store` over `grid`,
+/// as `loading` says, gridded in cells of side `cell_side`, its queries stopped by `cancel`.
+pub struct CloudLoading<'a> {
+    /// The tile store.
+    pub store: Store<'a>,
+    /// The tile grid.
+    pub grid: &'a Grid,
+    /// The halo and thinning.
+    pub loading: Loading<'a>,
+    /// Side of the cloud's grid cells.
+    pub cell_side: f64,
+    /// Stops the cloud's queries.
+    pub cancel: &'a Cancel,
+}
+
+impl CloudLoading<'_> {
+    /// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells, on the rayon
+    /// pool if `idle` says that the pool has nothing else to do (the same cloud either way).
+    pub fn load(&self, t: u32, idle: bool) -> Result<(Cloud, Vec<bool>)> {
+        let (tp, core) = load(self.store, self.grid, t, &self.loading)?;
+        let origin = tile_origin(&tp);
+        Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, self.cell_side, idle).cancelled_by(self.cancel), core))
+    }
 }
 
 #[cfg(test)]

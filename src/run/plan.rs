@@ -1,22 +1,23 @@
-//! The plan of a run: the tile grid over the cloud's bounds, sized from the memory budget.
+//! The plan step: a run continues the job its directory holds, or plans it anew, a tile grid
+//! over the cloud's bounds sized from the memory budget.
 
+use super::budgets::{BYTES_PER_POINT, MAX_TILE_POINTS, MIN_TILE_POINTS};
+use super::layout::{claim_work_dir, remove_working_data, use_work_dir, OUTPUTS, VIEW, WORKING, WORK_OWNER};
+use super::manifest::{self, Job, Manifest};
+use super::state::Planned;
+use super::types::{RunOptions, Worker};
+use crate::error::{Error, Result};
 use crate::points::Bounds;
+use crate::tiles::Grid;
+use crate::workspace::Workspace;
 use glam::DVec3;
-
-/// Bytes of memory a tile point costs while processed (points, tree, per-stage arrays, the
-/// halo share and the prefetched next tile).
-pub const BYTES_PER_POINT: u64 = 600;
-
-/// Most points a tile is planned to hold, whatever the memory allows. Each pass loads its
-/// first tile while the cores wait, and big tiles leave little to overlap: the 20 M-point
-/// scene in 2 tiles (the default budget) took 170 s; in 16 tiles, 137 s.
-pub const MAX_TILE_POINTS: u64 = 2_000_000;
+use std::path::Path;
 
 /// Tile edge length for a budget: tiles hold about `memory / BYTES_PER_POINT` points (at most
-/// [`MAX_TILE_POINTS`]), assuming the points spread evenly over the footprint (2D) or the
+/// [`MAX_TILE_POINTS`], at least [`MIN_TILE_POINTS`]), assuming the points spread evenly over the footprint (2D) or the
 /// volume (3D) of the bounds.
 pub fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
-    let per_tile = (memory / BYTES_PER_POINT).clamp(10_000, MAX_TILE_POINTS) as f64;
+    let per_tile = (memory / BYTES_PER_POINT).clamp(MIN_TILE_POINTS, MAX_TILE_POINTS) as f64;
     let ext = DVec3::from(b.max) - DVec3::from(b.min);
     let ext = ext.max(DVec3::splat(1e-9));
     let tiles = (points as f64 / per_tile).max(1.0);
@@ -24,4 +25,139 @@ pub fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
     let size = if flat { (ext.x * ext.y / tiles).sqrt() } else { (ext.x * ext.y * ext.z / tiles).cbrt() };
     // Never more than needed to hold everything in one tile.
     size.min(ext.max_element() * 1.001)
+}
+
+/// The plan step: continues the job the workspace holds, or plans it anew (the tile grid over
+/// `bounds()`, sized from the budget); a different job is refused, and `--force` always starts
+/// over.
+pub(super) fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions, worker: Option<Worker>) -> Result<Planned> {
+    // (With --force, whatever the directory holds, damaged or not, is replaced; so is the
+    // working data of the run it held, wherever that was.)
+    let held = if opts.force {
+        if let Some(old) = manifest::read(ws).ok().flatten() {
+            use_work_dir(ws, &old)?;
+            remove_working_data(ws);
+            ws.set_work_dir(None, &WORKING)?;
+        }
+        None
+    } else {
+        manifest::read(ws)?
+    };
+    match held {
+        Some(m) if m.job == job => {
+            refuse_resuming(ws, &m, opts, worker)?;
+            use_work_dir(ws, &m)?;
+            refuse_damaged(ws, &m)?;
+            Ok(Planned { manifest: m, resumed: true })
+        }
+        Some(m) => {
+            Err(Error::Usage(format!("{}: holds a different run: {}; use --force to start over", ws.root().display(), manifest::job_difference(&m.job, &job))))
+        }
+        None => plan_anew(ws, job, bounds, opts, worker),
+    }
+}
+
+/// Refuses to resume the run `m` describes as this invocation would: its working data was
+/// removed, it is asked to keep it elsewhere, it is shared by another number of workers, or its
+/// work directory belongs to another run.
+fn refuse_resuming(ws: &Workspace, m: &Manifest, opts: &RunOptions, worker: Option<Worker>) -> Result<()> {
+    if m.cleaned {
+        return Err(Error::Usage(format!(
+            "{}: this run finished and its working data was removed (--clean), so it cannot write its outputs again; they are in the directory as they were; use --force to run it again",
+            ws.root().display()
+        )));
+    }
+    let same = |w: &Path| m.work_dir.as_deref().is_some_and(|held| w.canonicalize().is_ok_and(|w| w == held));
+    if opts.work_dir.as_deref().is_some_and(|w| !same(w)) {
+        let was = m.work_dir.as_ref().map_or("the run directory".to_string(), |w| w.display().to_string());
+        return Err(Error::Usage(format!(
+            "{}: this run keeps its working data in {was}: resume it with that --work-dir (or none), or use --force to start over",
+            ws.root().display()
+        )));
+    }
+    if let (Some(n), Some(w)) = (m.workers, worker)
+        && w.count != n
+    {
+        return Err(Error::Usage(format!(
+            "{}: this run is shared by {n} workers (--worker I/{n}), not {}: give every worker the same count, or use --force (worker 0) to start over",
+            ws.root().display(),
+            w.count
+        )));
+    }
+    // (A manifest edited to point at another run's work directory would mix the two
+    // runs' tiles and results.)
+    if let Some(w) = &m.work_dir
+        && let Ok(held) = std::fs::read_to_string(w.join(WORK_OWNER))
+        && ws.root().canonicalize().is_ok_and(|run| held != format!("{}\n", run.display()))
+    {
+        return Err(Error::damaged(
+            ws.path(manifest::NAME),
+            format!("its work directory {} holds the working data of the run in {}", w.display(), held.trim()),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses a manifest whose plan crease did not make: an edited or damaged manifest must not
+/// size what the run allocates.
+fn refuse_damaged(ws: &Workspace, m: &Manifest) -> Result<()> {
+    let g = &m.grid;
+    let sane = g.tiles() <= crate::tiles::MAX_TILES && g.size > 0.0 && g.size.is_finite() && (!m.bucketed || m.tile_points.len() as u64 == g.tiles());
+    if !sane {
+        return Err(Error::damaged(ws.path(manifest::NAME), "its tile grid is not one crease planned"));
+    }
+    if m.resolved.as_ref().is_some_and(|r| !r.is_sane()) {
+        return Err(Error::damaged(
+            ws.path(manifest::NAME),
+            "its resolved parameters are not ones the statistics pass gives (a length not positive, a share or an angle out of range)",
+        ));
+    }
+    Ok(())
+}
+
+/// Plans `job` anew over an emptied run directory (and work directory, if the options give
+/// one): the tile grid over `bounds()`, sized from the memory budget unless a tile size is
+/// given; the manifest is saved.
+fn plan_anew(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions, worker: Option<Worker>) -> Result<Planned> {
+    let work_dir = match &opts.work_dir {
+        Some(w) => Some(claim_work_dir(w, ws.root())?),
+        None => None,
+    };
+    remove_working_data(ws);
+    for name in [VIEW].into_iter().chain(OUTPUTS) {
+        ws.remove(name);
+    }
+    if let Some(w) = &work_dir {
+        ws.set_work_dir(Some(w), &WORKING)?;
+        remove_working_data(ws);
+    }
+    let (b, declared) = bounds()?;
+    let size = opts.tile_size.unwrap_or_else(|| tile_size_for(&b, declared, opts.memory));
+    let grid = Grid::new(&b, size);
+    if grid.tiles() > crate::tiles::MAX_TILES || !(size > 0.0 && size.is_finite()) {
+        return Err(Error::Usage(format!(
+            "tiles of size {size} over the bounds {:?} to {:?} would make {} tiles, more than the {} crease handles: use a larger --tile-size or --memory",
+            b.min,
+            b.max,
+            grid.tiles(),
+            crate::tiles::MAX_TILES
+        )));
+    }
+    let m = Manifest {
+        job,
+        grid,
+        declared_points: declared,
+        diag: b.diagonal(),
+        bucketed: false,
+        tile_points: vec![],
+        resolved: None,
+        finished: false,
+        work_dir,
+        cleaned: false,
+        kept: None,
+        far_points: 0,
+        workers: worker.map(|w| w.count),
+    };
+    manifest::save(ws, &m)?;
+    Ok(Planned { manifest: m, resumed: false })
 }

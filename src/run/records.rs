@@ -2,7 +2,6 @@
 //! records of the codec (see [`crate::codec`]): one file a tile (or block) and pass,
 //! `<dir>/<number>.bin`, written atomically.
 
-use super::curves::Survey;
 use crate::codec::{self, Reader, Writer};
 use crate::curves::{Polyline, Shape, Vertex};
 use crate::error::{Error, Result};
@@ -233,9 +232,28 @@ impl Record for Smoothed {
     }
 }
 
-/// What the curve stage's survey found (see [`Survey`]), kept so that a resumed run, and
-/// every worker but the first, need not read every tile's edge points again. One record,
-/// number 0.
+/// A tile's edge points at a glance: its number and the bounds of its edge points (relative to
+/// the origin).
+pub type TileBox = (u32, DVec3, DVec3);
+
+/// What the curve stage's survey of the edge points found (see [`super::survey`]), kept so that
+/// a resumed run, and every worker but the first, need not read every tile's edge points
+/// again. One record, number 0.
+pub struct Survey {
+    /// Side of the base blocks planned.
+    pub side: f64,
+    /// The origin of the curve stage's positions, and of the blocks' grid.
+    pub origin: DVec3,
+    /// The counts of stages 1 and 2.
+    pub counts: Counts,
+    /// The tiles that hold edge points, with their bounds.
+    pub boxes: Vec<TileBox>,
+    /// The growth blocks.
+    pub blocks: Blocks,
+    /// Grouped corners, relative to the origin.
+    pub grouped: Vec<DVec3>,
+}
+
 impl Record for Survey {
     const KIND: [u8; 4] = *b"SURV";
     const DIR: &'static str = "survey";

@@ -1,8 +1,8 @@
 //! `crease status`: what a run directory has done and what is left.
 
-use super::curves::Survey;
+use super::layout::use_work_dir;
 use super::manifest;
-use super::records::{Edges, Pieces, Record, Residuals, Stats};
+use super::records::{Edges, Pieces, Record, Residuals, Stats, Survey};
 use crate::error::{Error, Result};
 use crate::workspace::Workspace;
 use serde::Serialize;
@@ -47,7 +47,7 @@ pub fn status(dir: &Path) -> Result<Status> {
     }
     let mut ws = Workspace::disk(dir)?;
     let m = manifest::read(&ws)?.ok_or_else(|| Error::input(dir, "not a crease run directory (no manifest.json)"))?;
-    super::use_work_dir(&mut ws, &m)?;
+    use_work_dir(&mut ws, &m)?;
     let tiles: Vec<u32> = (0..m.tile_points.len() as u32).filter(|&t| m.tile_points[t as usize] > 0).collect();
     let done = |dir: &str| tiles.iter().filter(|&&t| ws.exists(&super::records::name(dir, t))).count();
     let passes: Vec<(String, usize)> =

@@ -107,21 +107,8 @@ fn block(i: usize, j: usize, seed: u64, g: usize, clutter: bool) -> Block {
     let mut rng = Rng::stream(seed, (j * g + i) as u64);
     let o = DVec3::new(i as f64 * BLOCK, j as f64 * BLOCK, 0.0);
     let p = |x: f64, y: f64, z: f64| o + DVec3::new(x, y, z);
-    let mut s: Vec<(Surface, u8)> = vec![];
+    let mut s = street(o, j);
     let mut t: Vec<Vec<DVec3>> = vec![];
-    // Road and the curb face up to the pavement.
-    for r in rect(p(0.0, 0.0, 0.0), p(BLOCK, 0.0, 0.0), p(BLOCK, ROAD, 0.0), p(0.0, ROAD, 0.0)) {
-        s.push((r, 2));
-    }
-    for r in rect(p(0.0, ROAD, 0.0), p(BLOCK, ROAD, 0.0), p(BLOCK, ROAD, CURB), p(0.0, ROAD, CURB)) {
-        s.push((r, 2));
-    }
-    // The far curb: the previous row's pavement drops to this block's road at y = 0.
-    if j > 0 {
-        for r in rect(p(0.0, 0.0, 0.0), p(BLOCK, 0.0, 0.0), p(BLOCK, 0.0, CURB), p(0.0, 0.0, CURB)) {
-            s.push((r, 2));
-        }
-    }
     // Building footprint and height.
     let (w, d) = (rng.range(8.0, 16.0), rng.range(7.0, BLOCK - ROAD - 5.0));
     let x0 = rng.range(2.0, BLOCK - 2.0 - w);
@@ -185,15 +172,43 @@ fn block(i: usize, j: usize, seed: u64, g: usize, clutter: bool) -> Block {
     }
     if clutter {
         // (From a stream of its own, so that the rest of the block is the scene without clutter.)
-        let mut rng = Rng::stream(seed ^ 0xC1A7, (j * g + i) as u64);
-        let grass = Frame { origin: p(0.0, BLOCK - GRASS, CURB), x: DVec3::X, y: DVec3::Y };
-        s.push((Surface::HeightField { frame: grass, min: DVec2::ZERO, max: DVec2::new(BLOCK, GRASS), f: grass_height, max_slope: 0.6 }, 2));
-        let (tx, crown) = (rng.range(3.0, BLOCK - 3.0), rng.range(2.0, 3.0));
-        let trunk = rng.range(2.0, 3.5);
-        s.push((Surface::Scatter { centre: p(tx, ROAD + 1.0, CURB + trunk / 2.0), radii: DVec3::new(0.3, 0.3, trunk / 2.0) }, 5));
-        s.push((Surface::Scatter { centre: p(tx, ROAD + 1.0, CURB + trunk + 0.8 * crown), radii: DVec3::new(crown, crown, 0.8 * crown) }, 5));
+        s.extend(clutter_of(o, Rng::stream(seed ^ crate::salts::SCENE_CLUTTER, (j * g + i) as u64)));
     }
     Block { surfaces: s, truth: t }
+}
+
+/// The road of a block at `o` (scene-local) in row `j`, and its curbs: the face up to the
+/// pavement, and, past the first row, the far curb where the previous row's pavement drops to
+/// this block's road at y = 0. (With ASPRS class 2, ground.)
+fn street(o: DVec3, j: usize) -> Vec<(Surface, u8)> {
+    let p = |x: f64, y: f64, z: f64| o + DVec3::new(x, y, z);
+    let mut s = vec![];
+    for r in rect(p(0.0, 0.0, 0.0), p(BLOCK, 0.0, 0.0), p(BLOCK, ROAD, 0.0), p(0.0, ROAD, 0.0)) {
+        s.push((r, 2));
+    }
+    for r in rect(p(0.0, ROAD, 0.0), p(BLOCK, ROAD, 0.0), p(BLOCK, ROAD, CURB), p(0.0, ROAD, CURB)) {
+        s.push((r, 2));
+    }
+    if j > 0 {
+        for r in rect(p(0.0, 0.0, 0.0), p(BLOCK, 0.0, 0.0), p(BLOCK, 0.0, CURB), p(0.0, 0.0, CURB)) {
+            s.push((r, 2));
+        }
+    }
+    s
+}
+
+/// The clutter of a block at `o`, drawn from `rng`: a grass strip along its back, and a tree
+/// (trunk and crown, scatter of class 5) by the road.
+fn clutter_of(o: DVec3, mut rng: Rng) -> Vec<(Surface, u8)> {
+    let p = |x: f64, y: f64, z: f64| o + DVec3::new(x, y, z);
+    let mut s = vec![];
+    let grass = Frame { origin: p(0.0, BLOCK - GRASS, CURB), x: DVec3::X, y: DVec3::Y };
+    s.push((Surface::HeightField { frame: grass, min: DVec2::ZERO, max: DVec2::new(BLOCK, GRASS), f: grass_height, max_slope: 0.6 }, 2));
+    let (tx, crown) = (rng.range(3.0, BLOCK - 3.0), rng.range(2.0, 3.0));
+    let trunk = rng.range(2.0, 3.5);
+    s.push((Surface::Scatter { centre: p(tx, ROAD + 1.0, CURB + trunk / 2.0), radii: DVec3::new(0.3, 0.3, trunk / 2.0) }, 5));
+    s.push((Surface::Scatter { centre: p(tx, ROAD + 1.0, CURB + trunk + 0.8 * crown), radii: DVec3::new(crown, crown, 0.8 * crown) }, 5));
+    s
 }
 
 fn block_area(b: &Block) -> f64 {
