@@ -127,8 +127,11 @@ impl Run<'_> {
     /// bounds of each tile's edge points and the growth blocks of side `side`.
     fn survey_edges(&self, r: &Resolved, side: f64) -> Result<Survey> {
         let q = snap_quantum(r.kappa);
-        let anchor = DVec3::from(self.manifest.grid.origin);
         let cell = Census::new(side).cell_side();
+        // (The grid's origin is the low corner of the bounds the inputs declare, and a LAS
+        // header's bounds may be rounded outwards: snapped to whole cells, the anchor, and so
+        // the curves to the bit, are those of the points themselves, as in memory.)
+        let anchor = (DVec3::from(self.manifest.grid.origin) / cell).floor() * cell;
         let mut counts = Counts::default();
         // (Tiles are decoded in parallel, a few at a time, and reduced to what is kept.)
         let seen = self
