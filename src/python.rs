@@ -328,7 +328,8 @@ fn read(py: Python<'_>, path: PathBuf, tolerance: Option<f64>) -> PyResult<Curve
     let curves = py
         .detach(|| match file.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("ply") => crate::curves::read_ply(&file),
-            _ => crate::curves::read_obj(&file),
+            Some("obj") => crate::curves::read_obj(&file),
+            _ => Err(Error::input(&file, "not a curve file crease reads back (a crease PLY or OBJ)")),
         })
         .map_err(py_err)?;
     // (The run's report, beside its curves, gives their CRS and the typed pieces' tolerance.)
@@ -342,7 +343,7 @@ fn read(py: Python<'_>, path: PathBuf, tolerance: Option<f64>) -> PyResult<Curve
     Ok(Curves { curves: Arc::new(curves), crs, tolerance: tolerance.or(from_report), report })
 }
 
-/// Feature curves: a sequence of [`Curve`]s with their CRS.
+/// Feature curves: a sequence of Curve objects with their CRS (see the stubs for examples).
 #[pyclass(frozen, module = "crease", sequence)]
 struct Curves {
     curves: Arc<Vec<Polyline>>,
@@ -456,7 +457,7 @@ impl Curves {
     }
 }
 
-/// Iterates over [`Curves`].
+/// Iterates over Curves.
 #[pyclass(module = "crease")]
 struct CurvesIter {
     curves: Curves,
@@ -478,7 +479,7 @@ impl CurvesIter {
     }
 }
 
-/// One feature curve.
+/// One feature curve: its vertices (points, normals, corner flags) and attributes.
 #[pyclass(frozen, module = "crease")]
 struct Curve {
     all: Arc<Vec<Polyline>>,

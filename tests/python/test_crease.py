@@ -151,6 +151,8 @@ def test_bad_input_raises_input_error_naming_the_file_as_the_command_line_does(c
         crease.extract(np.zeros((0, 3)))
     with pytest.raises(crease.InputError, match="not a finished crease run"):
         crease.read(tmp_path)
+    with pytest.raises(crease.InputError, match="not a curve file"):
+        crease.read(fixtures / "cube.las")
 
 
 def test_bad_arguments_raise_value_or_type_errors_with_the_command_lines_messages(tmp_path):

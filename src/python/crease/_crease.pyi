@@ -3,6 +3,7 @@ classes. The functions are called through `crease.extract`, `crease.extract_file
 `crease.read` (src/python/crease/__init__.py)."""
 
 import os
+from pathlib import Path
 from typing import Any, Callable, Iterator, Optional, Sequence, Union, overload
 
 import numpy as np
@@ -132,7 +133,7 @@ class Curves(Sequence[Curve]):
             >>> points, ids = curves.to_numpy()
             >>> points[ids == curves[0].id]      # the first curve's vertices
         """
-    def write(self, path: Union[str, os.PathLike[str]], format: Optional[str] = None) -> os.PathLike[str]:
+    def write(self, path: Union[str, os.PathLike[str]], format: Optional[str] = None) -> Path:
         """Writes the curves to ``path`` as ``format``: ``obj``, ``ply``, ``geojson``, ``gpkg``,
         ``dxf`` or ``json`` (the typed pieces); by default from the file's extension. The files
         are those ``crease extract`` writes. Raises OSError if the file cannot be written.
@@ -163,14 +164,14 @@ class Run:
     """
 
     @property
-    def dir(self) -> os.PathLike[str]:
+    def dir(self) -> Path:
         """The run directory."""
     @property
     def report(self) -> dict[str, Any]:
         """``report.json`` as a dict: inputs, resolved parameters, counts per stage, seconds per
         pass, peak memory, tiles, warnings, CRS, ``resumed``."""
     @property
-    def outputs(self) -> list[os.PathLike[str]]:
+    def outputs(self) -> list[Path]:
         """The files written: the curve files, ``preview.png``, ``report.json``."""
     def curves(self) -> Curves:
         """The curves the run wrote."""
