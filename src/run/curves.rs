@@ -128,10 +128,15 @@ impl Run<'_> {
     fn survey_edges(&self, r: &Resolved, side: f64) -> Result<Survey> {
         let q = snap_quantum(r.kappa);
         let cell = Census::new(side).cell_side();
-        // (The grid's origin is the low corner of the bounds the inputs declare, and a LAS
-        // header's bounds may be rounded outwards: snapped to whole cells, the anchor, and so
-        // the curves to the bit, are those of the points themselves, as in memory.)
-        let anchor = (DVec3::from(self.manifest.grid.origin) / cell).floor() * cell;
+        // (The curves, to the bit, follow the anchor: it is the low corner of the points
+        // themselves, as in memory, not the grid's origin, the corner of the bounds the inputs
+        // declare, which a LAS header may round outwards. The two are one where the header is
+        // exact, and where far points were left out the grid was planned over the points.)
+        let m = &self.manifest;
+        let anchor = DVec3::from(match (m.kept, m.points_min) {
+            (None, Some(min)) => min,
+            _ => m.grid.origin,
+        });
         let mut counts = Counts::default();
         // (Tiles are decoded in parallel, a few at a time, and reduced to what is kept.)
         let seen = self

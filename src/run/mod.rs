@@ -820,6 +820,7 @@ fn plan(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u
         kept: None,
         far_points: 0,
         workers: worker.map(|w| w.count),
+        points_min: None,
     };
     manifest::save(ws, &m)?;
     Ok((m, false))
@@ -1014,7 +1015,7 @@ impl<'a> Run<'a> {
             store.clear()?;
             let grid = self.manifest.grid.clone();
             let tiles = Bucketer::new(&grid, store, (self.opts.memory / 4 / 48) as usize);
-            let mut sink = bucket::Sink { tiles, spread: far::Spread::new(&grid.span()), kept: self.manifest.kept, far: 0 };
+            let mut sink = bucket::Sink { tiles, spread: far::Spread::new(&grid.span()), kept: self.manifest.kept, far: 0, seen: Bounds::EMPTY };
             let bar = self.progress.bar("bucketing", self.manifest.declared_points, "points");
             bucket::bucket(input, &mut sink, &bar, &self.opts.cancel)?;
             bar.finish();
@@ -1028,6 +1029,7 @@ impl<'a> Run<'a> {
                     store.sync()?;
                     self.manifest.tile_points = sink.tiles.counts.clone();
                     self.manifest.far_points = sink.far;
+                    self.manifest.points_min = (!sink.seen.is_empty()).then_some(sink.seen.min);
                     break;
                 }
             }
