@@ -104,7 +104,7 @@ impl<'py> Options<'py> {
     /// degrees), checked.
     fn params(&self) -> PyResult<Params> {
         let model = match self.take::<String>("model")? {
-            Some(m) => Some(Model::parse(&m).ok_or_else(|| PyValueError::new_err(format!("'{m}' is not a model: balls or cells")))?),
+            Some(m) => Some(Model::parse(&m).ok_or_else(|| PyValueError::new_err(format!("'{m}' is not a model: balls, cells or patches")))?),
             None => None,
         };
         let p = Params {

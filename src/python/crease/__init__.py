@@ -47,7 +47,7 @@ def extract(points: Any, *, progress: Progress = False, **params: Any) -> Curves
 
     The method parameters are those of ``crease extract``, by the same names: ``kappa``,
     ``fit_radius``, ``rmls_radius``, ``tau``, ``step``, ``max_turn``, ``min_angle`` (degrees),
-    ``seed``, ``evaluate_per_fit``, ``model`` (``"balls"`` or ``"cells"``); and ``min_confidence``,
+    ``seed``, ``evaluate_per_fit``, ``model`` (``"balls"``, ``"cells"`` or ``"patches"``); and ``min_confidence``,
     ``min_length``, ``outside`` (``"up"``, ``"unknown"`` or scanner positions as an (M, 3) array),
     ``crs`` (``"EPSG:N"`` or a WKT, carried to the outputs), ``memory`` (bytes or ``"2G"``),
     ``tile_size`` and ``threads``. The curves are the same at any thread count, and the same as
