@@ -42,6 +42,8 @@ pub mod mem;
 pub mod points;
 pub mod preview;
 pub mod progress;
+#[cfg(feature = "python")]
+mod python;
 pub mod rng;
 pub mod run;
 pub(crate) mod salts;

@@ -47,26 +47,9 @@ impl FilterArgs {
             .as_deref()
             .map(|c| crease::io::TextColumns::parse(c, self.skip_lines).map_err(|e| Error::Usage(format!("--columns {e}"))))
             .transpose()?;
-        let bounds = self.bounds.as_deref().map(box_of).transpose().map_err(|e| Error::Usage(format!("--bounds {e}")))?;
+        let bounds = self.bounds.as_deref().map(crease::points::Bounds::from_list).transpose().map_err(|e| Error::Usage(format!("--bounds {e}")))?;
         Ok(crease::io::Filter { classes: self.classes.clone(), keep_noise: self.keep_noise, text, bounds })
     }
-}
-
-/// The box `--bounds` gives: XMIN,YMIN,XMAX,YMAX (any height) or XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX.
-fn box_of(v: &[f64]) -> Result<crease::points::Bounds, String> {
-    let (min, max) = match *v {
-        [x0, y0, x1, y1] => ([x0, y0, -f64::MAX], [x1, y1, f64::MAX]),
-        [x0, y0, z0, x1, y1, z1] => ([x0, y0, z0], [x1, y1, z1]),
-        _ => return Err(format!("takes 4 or 6 numbers (XMIN,YMIN,XMAX,YMAX or XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX), not {}", v.len())),
-    };
-    if v.iter().any(|x| !x.is_finite()) {
-        return Err("takes finite numbers".into());
-    }
-    let b = crease::points::Bounds { min, max };
-    if (0..3).any(|a| min[a] > max[a]) {
-        return Err(format!("has a minimum above its maximum ({})", b.ranges()));
-    }
-    Ok(b)
 }
 
 /// Method parameters; lengths in model units, the input CRS's horizontal unit (`crease info`
@@ -328,24 +311,6 @@ enum SynthCmd {
     },
 }
 
-/// Parses sizes such as 1G, 512M, 2.5GB, 1000000 (bytes).
-fn parse_size(s: &str) -> Result<u64, String> {
-    let t = s.trim().to_ascii_uppercase();
-    let t = t.strip_suffix('B').unwrap_or(&t);
-    let (num, mul) = match t.chars().last() {
-        Some('K') => (&t[..t.len() - 1], 1u64 << 10),
-        Some('M') => (&t[..t.len() - 1], 1 << 20),
-        Some('G') => (&t[..t.len() - 1], 1 << 30),
-        Some('T') => (&t[..t.len() - 1], 1 << 40),
-        _ => (t, 1),
-    };
-    let v: f64 = num.parse().map_err(|_| format!("'{s}' is not a size (e.g. 1G, 512M)"))?;
-    if v.is_nan() || v <= 0.0 {
-        return Err(format!("'{s}' must be positive"));
-    }
-    Ok((v * mul as f64) as u64)
-}
-
 fn read_curves(path: &std::path::Path) -> Result<Vec<crease::curves::Polyline>, Error> {
     match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
         Some("ply") => crease::curves::read_ply(path),
@@ -464,9 +429,6 @@ fn man_cmd(subcommand: Option<&str>, dir: Option<&Path>) -> Result<(), Error> {
     man.render(&mut std::io::stdout()).map_err(|e| Error::output("stdout", e))
 }
 
-/// Most worker threads a core may be given: more only adds switching and memory.
-const MAX_THREADS_PER_CORE: usize = 4;
-
 /// The arguments of `crease extract`.
 #[derive(Args)]
 struct ExtractArgs {
@@ -494,7 +456,7 @@ struct ExtractArgs {
     threads: Option<usize>,
     /// Memory budget, e.g. 1G or 512M (default: half of the machine's memory); sets the
     /// tile size (at most about 2 M points a tile).
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = crease::mem::parse_size)]
     memory: Option<u64>,
     /// Tile edge length in model units (overrides the size derived from --memory).
     #[arg(long)]
@@ -660,12 +622,10 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
     Ok(())
 }
 
-/// `--threads n`: the size of rayon's global pool, at most [`MAX_THREADS_PER_CORE`] a core.
+/// `--threads n`: the size of rayon's global pool, at most
+/// [`crease::run::MAX_THREADS_PER_CORE`] a core.
 fn set_threads(n: usize) -> Result<(), Error> {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if n > MAX_THREADS_PER_CORE * cores {
-        return Err(Error::Usage(format!("--threads {n}: at most {} on this machine ({MAX_THREADS_PER_CORE} a core)", MAX_THREADS_PER_CORE * cores)));
-    }
+    crease::run::check_threads(n)?;
     rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| Error::Usage(e.to_string()))
 }
 
@@ -682,6 +642,7 @@ fn run_options(a: &ExtractArgs) -> crease::run::RunOptions {
         tile_size: a.tile_size,
         force: a.force,
         progress: if a.quiet { crease::progress::Mode::Quiet } else { crease::progress::Mode::Auto },
+        watch: None,
         cancel,
         debug: crease::debug::DebugDump::new(a.debug_dir.clone().or_else(|| std::env::var_os("CREASE_DEBUG_DIR").map(PathBuf::from))),
         min_confidence: a.min_confidence,

@@ -92,3 +92,27 @@ pub fn release_free_memory() {
         libc::malloc_trim(0);
     }
 }
+
+/// Parses sizes such as 1G, 512M, 2.5GB, 1000000 (bytes), as `--memory` takes them (and the
+/// Python binding's `memory=`).
+///
+/// ```
+/// assert_eq!(crease::mem::parse_size("512M"), Ok(512 << 20));
+/// assert!(crease::mem::parse_size("lots").is_err());
+/// ```
+pub fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim().to_ascii_uppercase();
+    let t = t.strip_suffix('B').unwrap_or(&t);
+    let (num, mul) = match t.chars().last() {
+        Some('K') => (&t[..t.len() - 1], 1u64 << 10),
+        Some('M') => (&t[..t.len() - 1], 1 << 20),
+        Some('G') => (&t[..t.len() - 1], 1 << 30),
+        Some('T') => (&t[..t.len() - 1], 1 << 40),
+        _ => (t, 1),
+    };
+    let v: f64 = num.parse().map_err(|_| format!("'{s}' is not a size (e.g. 1G, 512M)"))?;
+    if v.is_nan() || v <= 0.0 {
+        return Err(format!("'{s}' must be positive"));
+    }
+    Ok((v * mul as f64) as u64)
+}

@@ -17,6 +17,24 @@ impl Bounds {
     /// The empty box: growing it by any point gives that point's box.
     pub const EMPTY: Bounds = Bounds { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] };
 
+    /// The box `--bounds` gives (and the Python binding's `bounds=`): XMIN,YMIN,XMAX,YMAX (any
+    /// height) or XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX.
+    pub fn from_list(v: &[f64]) -> Result<Bounds, String> {
+        let (min, max) = match *v {
+            [x0, y0, x1, y1] => ([x0, y0, -f64::MAX], [x1, y1, f64::MAX]),
+            [x0, y0, z0, x1, y1, z1] => ([x0, y0, z0], [x1, y1, z1]),
+            _ => return Err(format!("takes 4 or 6 numbers (XMIN,YMIN,XMAX,YMAX or XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX), not {}", v.len())),
+        };
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err("takes finite numbers".into());
+        }
+        let b = Bounds { min, max };
+        if (0..3).any(|a| min[a] > max[a]) {
+            return Err(format!("has a minimum above its maximum ({})", b.ranges()));
+        }
+        Ok(b)
+    }
+
     /// True if no point was ever added.
     pub fn is_empty(&self) -> bool {
         self.min[0] > self.max[0]

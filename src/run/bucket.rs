@@ -30,6 +30,8 @@ pub struct Sink<'a> {
     pub kept: Option<Bounds>,
     /// Points left out as far.
     pub far: u64,
+    /// The bounds of the points bucketed.
+    pub seen: Bounds,
 }
 
 /// Streams every point of `input` into `b`, counting the records read on `bar` (points left
@@ -63,10 +65,12 @@ fn add(b: &mut Sink, fi: usize, chunk: &PointChunk, cancel: &Cancel) -> Result<(
             };
             let gids: Vec<u64> = inside.iter().map(|&k| gids[k]).collect();
             b.spread.add(&part.xyz);
+            part.xyz.iter().for_each(|&p| b.seen.grow(p));
             b.tiles.add(&part, &gids)?;
         }
         _ => {
             b.spread.add(&chunk.xyz);
+            chunk.xyz.iter().for_each(|&p| b.seen.grow(p));
             b.tiles.add(chunk, &gids)?;
         }
     }

@@ -87,6 +87,10 @@ pub struct Manifest {
     /// another count would share the tiles out otherwise, leaving some to no one.
     #[serde(default)]
     pub workers: Option<u32>,
+    /// The low corner of the points bucketed (absent from older manifests): where the
+    /// curve stage is anchored, rather than at the corner of the bounds the inputs declare.
+    #[serde(default)]
+    pub points_min: Option<[f64; 3]>,
 }
 
 /// The stamp of input file `path`: size, modification time, hash of the first 64 KiB.

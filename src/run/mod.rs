@@ -82,7 +82,7 @@ pub use layout::{write_view, OUTPUTS};
 pub use manifest::{common_crs, InputStamp, Job, Manifest};
 pub use plan::tile_size_for;
 pub use status::{render_status, status, Status};
-pub use types::{Extraction, PassSeconds, ProjectionCost, Report, RunOptions, ShapeCounts, Worker, WorkerStep};
+pub use types::{check_threads, Extraction, PassSeconds, ProjectionCost, Report, RunOptions, ShapeCounts, Worker, WorkerStep, MAX_THREADS_PER_CORE};
 
 use crate::curves::{Curves, Outside};
 use crate::error::{Error, Result};

@@ -88,7 +88,7 @@ impl<'a> Run<'a> {
     pub(super) fn new(ws: Workspace, planned: Planned, opts: &'a RunOptions, worker: Option<Worker>, started: Instant) -> Run<'a> {
         let Planned { manifest, resumed } = planned;
         let kq = key_quantum(manifest.diag);
-        let progress = Progress::new(opts.progress);
+        let progress = Progress::new(opts.progress, opts.watch.clone());
         let pass = PassSeconds::default();
         Run {
             ws,

@@ -45,7 +45,15 @@ impl Run<'_> {
     /// bounds of each tile's edge points and the growth blocks of side `side`.
     fn survey_edges(&self, r: &Resolved, side: f64) -> Result<Survey> {
         let q = snap_quantum(r.kappa);
-        let anchor = DVec3::from(self.manifest.grid.origin);
+        // (The curves, to the bit, follow the anchor: it is the low corner of the points
+        // themselves, as in memory, not the grid's origin, the corner of the bounds the inputs
+        // declare, which a LAS header may round outwards. The two are one where the header is
+        // exact, and where far points were left out the grid was planned over the points.)
+        let m = &self.manifest;
+        let anchor = DVec3::from(match (m.kept, m.points_min) {
+            (None, Some(min)) => min,
+            _ => m.grid.origin,
+        });
         let cell = Census::new(side).cell_side();
         let mut counts = Counts::default();
         // (Tiles are decoded in parallel, a few at a time, and reduced to what is kept.)

@@ -65,7 +65,7 @@ impl Run<'_> {
             store.clear()?;
             let grid = self.manifest.grid.clone();
             let tiles = Bucketer::new(&grid, store, budgets::bucket_buffer(self.opts.memory));
-            let mut sink = bucket::Sink { tiles, spread: far::Spread::new(&grid.span()), kept: self.manifest.kept, far: 0 };
+            let mut sink = bucket::Sink { tiles, spread: far::Spread::new(&grid.span()), kept: self.manifest.kept, far: 0, seen: Bounds::EMPTY };
             let bar = self.progress.bar("bucketing", self.manifest.declared_points, "points");
             bucket::bucket(input, &mut sink, &bar, &self.opts.cancel)?;
             bar.finish();
@@ -79,6 +79,7 @@ impl Run<'_> {
                     store.sync()?;
                     self.manifest.tile_points = sink.tiles.counts.clone();
                     self.manifest.far_points = sink.far;
+                    self.manifest.points_min = (!sink.seen.is_empty()).then_some(sink.seen.min);
                     break;
                 }
             }

@@ -23,6 +23,9 @@ pub struct RunOptions {
     pub force: bool,
     /// Progress output.
     pub progress: crate::progress::Mode,
+    /// Also tells each stage's counts to this, whatever `progress` is, for a caller that draws
+    /// its own progress (the Python binding).
+    pub watch: Option<crate::progress::Watch>,
     /// Stops the run after the tile in hand (Ctrl-C, SIGTERM).
     pub cancel: Cancel,
     /// Where intermediate point sets are written, if anywhere.
@@ -65,6 +68,7 @@ impl Default for RunOptions {
             tile_size: None,
             force: false,
             progress: crate::progress::Mode::Quiet,
+            watch: None,
             cancel: Cancel::default(),
             debug: DebugDump::default(),
             min_confidence: polylines::DEFAULT_MIN_CONFIDENCE,
@@ -157,6 +161,19 @@ pub enum WorkerStep {
     Waiting(String),
     /// The run had already finished (its outputs written by worker 0): nothing is left to do.
     AlreadyFinished,
+}
+
+/// Most worker threads a core may be given: more only adds switching and memory.
+pub const MAX_THREADS_PER_CORE: usize = 4;
+
+/// Refuses a thread count above [`MAX_THREADS_PER_CORE`] a core, with the message `--threads`
+/// gives (a typo such as 10000 would otherwise start that many threads).
+pub fn check_threads(n: usize) -> Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if n > MAX_THREADS_PER_CORE * cores {
+        return Err(Error::Usage(format!("--threads {n}: at most {} on this machine ({MAX_THREADS_PER_CORE} a core)", MAX_THREADS_PER_CORE * cores)));
+    }
+    Ok(())
 }
 
 /// What `report.json` holds.
