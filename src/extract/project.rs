@@ -614,13 +614,14 @@ fn solve(xs: &[DVec3], centre: DVec3, found: Found, pts: &[DVec3], reach: f64, p
     xs.iter()
         .map(|&x| {
             // The surfaces nearest to the candidate, each at an angle to those nearer (a
-            // surface parallel to a nearer one, such as a plate's far face, meets neither).
+            // surface parallel to a nearer one, such as a plate's far face, meets neither;
+            // the two planes of a lone surface split in two meet at a crease of their own test).
             let mut order: Vec<usize> = (0..surfaces.len()).collect();
             order.sort_by(|&a, &b| surfaces[a].quad.value(x).abs().total_cmp(&surfaces[b].quad.value(x).abs()));
             let mut nearest: Vec<usize> = Vec::with_capacity(3);
             for a in order {
                 let na = surfaces[a].quad.frame.n;
-                if nearest.len() < 3 && nearest.iter().all(|&b| surfaces[b].quad.frame.n.dot(na).abs() < split) {
+                if nearest.len() < 3 && (lone_split || nearest.iter().all(|&b| surfaces[b].quad.frame.n.dot(na).abs() < split)) {
                     nearest.push(a);
                 }
             }
