@@ -391,14 +391,7 @@ fn patch_search(s: &mut Scratch, on_band: &[bool], x: DVec3, reach: f64, id: u64
             }
         }
     }
-    let mut lone_split = false;
-    if let [lone] = surfaces.as_slice()
-        && let Some(pair) = split_lone_surface(lone, &s.pts, p.min_threshold)
-    {
-        surfaces = pair;
-        lone_split = true;
-    }
-    Ok(Found { surfaces, lone_split })
+    Ok(Found::of(surfaces, &s.pts, p.min_threshold))
 }
 
 /// The connected pieces of the points `members` of `pts`, two points linked when within `link`
@@ -542,6 +535,19 @@ struct Found {
     lone_split: bool,
 }
 
+impl Found {
+    /// The surfaces a search found among `pts`; a lone one split in two if it took in both
+    /// sides of a gentle crease (see [`split_lone_surface`]).
+    fn of(surfaces: Vec<Surface>, pts: &[DVec3], min_threshold: f64) -> Found {
+        if let [lone] = surfaces.as_slice()
+            && let Some(pair) = split_lone_surface(lone, pts, min_threshold)
+        {
+            return Found { surfaces: pair, lone_split: true };
+        }
+        Found { surfaces, lone_split: false }
+    }
+}
+
 /// Why a search ended without surfaces that could meet at an edge.
 #[derive(Clone, Copy)]
 enum NoEdge {
@@ -589,14 +595,7 @@ fn search(s: &mut Scratch, id: u64, p: &ProjectParams) -> Result<Found, NoEdge> 
             surfaces.push(surf);
         }
     }
-    let mut lone_split = false;
-    if let [lone] = surfaces.as_slice()
-        && let Some(pair) = split_lone_surface(lone, &s.pts, p.min_threshold)
-    {
-        surfaces = pair;
-        lone_split = true;
-    }
-    Ok(Found { surfaces, lone_split })
+    Ok(Found::of(surfaces, &s.pts, p.min_threshold))
 }
 
 /// Projects each of `xs` onto the intersection of the two of `found`'s surfaces nearest to it
