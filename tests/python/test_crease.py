@@ -97,7 +97,9 @@ def test_an_interrupted_run_resumes_to_the_same_curves(cube_las, tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         crease.extract_file(cube_las, tmp_path / "run", memory="8M", progress=stop_after_bucketing)
-    assert seen[0][0] == "bucketing" and seen[0][3] == "points"
+    # (The callback is polled: a small cloud may be bucketed before it is first called, so
+    # only the stage it stopped in is known: one after bucketing.)
+    assert seen and seen[-1][0] != "bucketing"
     assert (tmp_path / "run" / "manifest.json").is_file()
     assert not (tmp_path / "run" / "curves.ply").exists()
     run = crease.extract_file([cube_las], tmp_path / "run", memory="8M", progress=False)
