@@ -272,28 +272,28 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, r: &
 /// as [`tile_edges`] takes it.
 pub fn project(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, p: &ProjectParams) -> Vec<Projected> {
     match p.model {
-        Model::Balls => project_balls(cloud, candidates, p),
+        Model::Balls => project_each(cloud, candidates, None, p),
         Model::Cells => project_cells(cloud, candidates, p),
         Model::Patches => {
-            let own;
+            let mut own = Vec::new();
             let band = match band {
                 Some(b) => b,
                 None => {
-                    let mut b = vec![false; cloud.len()];
-                    candidates.iter().for_each(|&i| b[i as usize] = true);
-                    own = b;
+                    own.resize(cloud.len(), false);
+                    candidates.iter().for_each(|&i| own[i as usize] = true);
                     &own
                 }
             };
-            project_patches(cloud, candidates, band, p)
+            project_each(cloud, candidates, Some(band), p)
         }
     }
 }
 
-/// Projects every candidate (by index into `cloud`) with a forward search over its own ball,
-/// its random stream keyed by its position (on the grid of the point keys), so the same in any
-/// tiling.
-fn project_balls(cloud: &Cloud, candidates: &[u32], p: &ProjectParams) -> Vec<Projected> {
+/// Projects every candidate (by index into `cloud`) with a search of its own ball, its random
+/// stream keyed by its position (on the grid of the point keys), so the same in any tiling: the
+/// forward search over the whole ball, or, given the `band` of candidates, the patches first
+/// (see [`patch_search`]).
+fn project_each(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, p: &ProjectParams) -> Vec<Projected> {
     let (o, q) = (cloud.origin, p.key_quantum);
     let mut slot: Vec<(u32, u64)> = candidates.iter().map(|&i| (i, position_key(cloud.at(i as usize) + o, q))).collect();
     slot.sort_unstable_by_key(|s| s.0);
@@ -303,31 +303,15 @@ fn project_balls(cloud: &Cloud, candidates: &[u32], p: &ProjectParams) -> Vec<Pr
         let x = cloud.at(i as usize);
         s.pts.clear();
         s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
-        match search(s, id_of(i), p) {
-            Ok(found) => {
-                let reach = buf.iter().map(|&(_, d2)| (d2 as f64).sqrt()).fold(p.radius, f64::max);
-                solve(&[x], x, found, &s.pts, reach, p).pop().unwrap_or_default()
-            }
-            Err(end) => end.projected(),
-        }
-    })
-}
-
-/// Projects every candidate (by index into `cloud`) with a search of its own ball that takes
-/// the patches first (see [`patch_search`]), its random stream keyed as in [`project_balls`].
-fn project_patches(cloud: &Cloud, candidates: &[u32], band: &[bool], p: &ProjectParams) -> Vec<Projected> {
-    let (o, q) = (cloud.origin, p.key_quantum);
-    let mut slot: Vec<(u32, u64)> = candidates.iter().map(|&i| (i, position_key(cloud.at(i as usize) + o, q))).collect();
-    slot.sort_unstable_by_key(|s| s.0);
-    let id_of = |i: u32| slot[slot.binary_search_by_key(&i, |s| s.0).expect("candidate")].1;
-    let nb = Neighbourhood { radius: p.radius, reach: p.reach, min: MIN_NEIGHBOURS, max: MAX_NEIGHBOURS, ordered: true };
-    cloud.map_neighbourhoods(candidates, nb, Scratch::default, |s, i, buf| {
-        let x = cloud.at(i as usize);
-        s.pts.clear();
-        s.pts.extend(buf.iter().map(|&(j, _)| cloud.at(j as usize)));
-        let on_band: Vec<bool> = buf.iter().map(|&(j, _)| band[j as usize]).collect();
         let reach = buf.iter().map(|&(_, d2)| (d2 as f64).sqrt()).fold(p.radius, f64::max);
-        match patch_search(s, &on_band, x, reach, id_of(i), p) {
+        let found = match band {
+            None => search(s, id_of(i), p),
+            Some(band) => {
+                let on_band: Vec<bool> = buf.iter().map(|&(j, _)| band[j as usize]).collect();
+                patch_search(s, &on_band, x, reach, id_of(i), p)
+            }
+        };
+        match found {
             Ok(found) => solve(&[x], x, found, &s.pts, reach, p).pop().unwrap_or_default(),
             Err(end) => end.projected(),
         }
