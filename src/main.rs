@@ -469,7 +469,7 @@ struct ExtractArgs {
     #[arg(long)]
     per_file: bool,
     /// Keep the working data (the tile store and per-tile results, about the size of a LAS
-    /// input, more for noisy clouds) in this directory instead of the output directory, e.g.
+    /// input, more for noisy clouds) in this directory instead of the output directory's `work/`, e.g.
     /// on a scratch disk (with --per-file, in a subdirectory per file). A resumed run keeps
     /// the one it started with.
     #[arg(long, value_name = "DIR")]

@@ -26,14 +26,24 @@ pub(super) const VIEW: &str = "view.html";
 /// The top-level names of a run's working data: the tile store and the per-tile results.
 pub(super) const WORKING: [&str; 8] = [crate::tiles::DIR, Stats::DIR, Residuals::DIR, Edges::DIR, Survey::DIR, Smoothed::DIR, Pieces::DIR, Finished::DIR];
 
+/// The subdirectory of the run directory that holds the working data, unless `--work-dir` puts
+/// it elsewhere.
+pub(super) const WORK: &str = "work";
+
 /// Name of the file by which a work directory names the run directory it belongs to.
 pub(super) const WORK_OWNER: &str = "crease-run";
 
-/// Points `ws` at the working data of the run `m` describes.
+/// Points `ws` at the working data of the run `m` describes: its `--work-dir`, else `work/`
+/// in the run directory, or the top of the run directory for a run of the older layout (see
+/// [`Manifest::layout`]). A cleaned run has none.
 pub(super) fn use_work_dir(ws: &mut Workspace, m: &Manifest) -> Result<()> {
     match &m.work_dir {
         Some(w) => ws.set_work_dir(Some(w), &WORKING),
-        None => Ok(()),
+        None if m.layout == 0 || m.cleaned => Ok(()),
+        None => {
+            let work = ws.root().join(WORK);
+            ws.set_work_dir(Some(&work), &WORKING)
+        }
     }
 }
 
@@ -76,7 +86,8 @@ pub(super) fn is_run_file(dir: &Path, f: &Path) -> bool {
     };
     let top = rel.components().next().map(|c| c.as_os_str().to_string_lossy().into_owned()).unwrap_or_default();
     // (Workers' locks are `lock.<i>`.)
-    (WORKING.contains(&top.as_str()) || ["out.tmp", manifest::NAME, "lock", VIEW].contains(&top.as_str()))
+    // (The working data of a run of the older layout is at the top.)
+    (WORKING.contains(&top.as_str()) || [WORK, "out.tmp", manifest::NAME, "lock", VIEW].contains(&top.as_str()))
         || OUTPUTS.contains(&top.as_str())
         || top.strip_prefix("lock.").is_some_and(|i| i.parse::<u32>().is_ok())
 }
@@ -202,6 +213,8 @@ pub(super) fn clean(ws: &Workspace, m: &mut Manifest) -> Result<()> {
     if let Some(w) = &m.work_dir {
         let _ = std::fs::remove_file(w.join(WORK_OWNER));
         let _ = std::fs::remove_dir(w);
+    } else if m.layout > 0 {
+        let _ = std::fs::remove_dir(ws.root().join(WORK));
     }
     m.cleaned = true;
     manifest::save(ws, m)

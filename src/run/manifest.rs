@@ -91,7 +91,15 @@ pub struct Manifest {
     /// curve stage is anchored, rather than at the corner of the bounds the inputs declare.
     #[serde(default)]
     pub points_min: Option<[f64; 3]>,
+    /// The run directory's layout: [`LAYOUT`] keeps the working data in `work/` (unless
+    /// `work_dir` says elsewhere); 0, that of manifests without the field (crease 0.8 and
+    /// earlier), keeps it at the top of the run directory, beside the outputs.
+    #[serde(default)]
+    pub layout: u32,
 }
+
+/// The layout of the run directories crease makes (see [`Manifest::layout`]).
+pub const LAYOUT: u32 = 1;
 
 /// The stamp of input file `path`: size, modification time, hash of the first 64 KiB.
 pub fn stamp(path: &Path) -> Result<InputStamp> {

@@ -25,19 +25,22 @@
 //! for other workers. Per-tile and per-block results are records of the codec (`records.rs`);
 //! `crease status` reads them ([`status()`]).
 //!
-//! Run directory layout:
-//! - `manifest.json`: the job (inputs with size, mtime and header checksum; parameters; crease
-//!   version), the plan (grid), and what is done;
-//! - `tiles/`: bucketed points; `stats/`, `resid/`, `edges/`: one result file per tile and pass;
-//!   `survey/`, `smoothed/`, `pieces/`: the curve stage's, one file per growth block;
-//!   `finished/`: the curves a batch at a time; each file a record of the codec (see `codec.rs`:
-//!   a header with the kind of record, a format number and a CRC-32, then a zstd payload);
+//! Run directory layout, the outputs at the top and the working data below `work/`:
 //! - `curves.*`, `preview.png`, `report.json`: the outputs;
+//! - `manifest.json`: the job (inputs with size, mtime and header checksum; parameters; crease
+//!   version), the plan (grid), the layout, and what is done (`finished` once the outputs are
+//!   in place, before `report.json` is written);
+//! - `work/tiles/`: bucketed points; `work/stats/`, `work/resid/`, `work/edges/`: one result
+//!   file per tile and pass; `work/survey/`, `work/smoothed/`, `work/pieces/`: the curve
+//!   stage's, one file per growth block; `work/finished/`: the curves a batch at a time; each
+//!   file a record of the codec (see `codec.rs`: a header with the kind of record, a format
+//!   number and a CRC-32, then a zstd payload);
 //! - `lock`, and `lock.<i>` for worker `i` of several sharing the run ([`run_worker`]), removed
-//!   when the run ends.
+//!   when the run ends, finished, failed or interrupted.
 //!
-//! With `--work-dir`, the working data is in that directory instead, which names its run in
-//! `crease-run`. The working data lets an interrupted run continue and a finished one write its
+//! With `--work-dir`, the working data is in that directory instead of `work/`, and the work
+//! directory names its run in `crease-run`. A run directory of crease 0.8 or earlier (a
+//! manifest without `layout`) keeps its working data at the top, and is resumed so. The working data lets an interrupted run continue and a finished one write its
 //! outputs again with other output settings; `--clean` removes it, and the run is then final.
 //! A damaged per-tile or per-block result is computed again and listed in `report.json`
 //! (`repaired`); a damaged tile store or manifest stops the run naming the file (exit 65).

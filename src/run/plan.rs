@@ -2,7 +2,7 @@
 //! over the cloud's bounds sized from the memory budget.
 
 use super::budgets::{BYTES_PER_POINT, MAX_TILE_POINTS, MIN_TILE_POINTS};
-use super::layout::{claim_work_dir, remove_working_data, use_work_dir, OUTPUTS, VIEW, WORKING, WORK_OWNER};
+use super::layout::{claim_work_dir, remove_working_data, use_work_dir, OUTPUTS, VIEW, WORK, WORKING, WORK_OWNER};
 use super::manifest::{self, Job, Manifest};
 use super::state::Planned;
 use super::types::{RunOptions, Worker};
@@ -115,21 +115,18 @@ fn refuse_damaged(ws: &Workspace, m: &Manifest) -> Result<()> {
     Ok(())
 }
 
-/// Plans `job` anew over an emptied run directory (and work directory, if the options give
-/// one): the tile grid over `bounds()`, sized from the memory budget unless a tile size is
-/// given; the manifest is saved.
+/// Plans `job` anew over an emptied run directory and work directory (`work/` in the run
+/// directory unless the options give one): the tile grid over `bounds()`, sized from the memory
+/// budget unless a tile size is given; the manifest is saved.
 fn plan_anew(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Bounds, u64)>, opts: &RunOptions, worker: Option<Worker>) -> Result<Planned> {
     let work_dir = match &opts.work_dir {
         Some(w) => Some(claim_work_dir(w, ws.root())?),
         None => None,
     };
+    // (Working data at the top is that of a run of the older layout.)
     remove_working_data(ws);
     for name in [VIEW].into_iter().chain(OUTPUTS) {
         ws.remove(name);
-    }
-    if let Some(w) = &work_dir {
-        ws.set_work_dir(Some(w), &WORKING)?;
-        remove_working_data(ws);
     }
     let (b, declared) = bounds()?;
     let size = opts.tile_size.unwrap_or_else(|| tile_size_for(&b, declared, opts.memory));
@@ -143,6 +140,10 @@ fn plan_anew(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Boun
             crate::tiles::MAX_TILES
         )));
     }
+    // (Only now: a run refused before it is planned leaves no work directory behind.)
+    let work = work_dir.clone().unwrap_or_else(|| ws.root().join(WORK));
+    ws.set_work_dir(Some(&work), &WORKING)?;
+    remove_working_data(ws);
     let m = Manifest {
         job,
         grid,
@@ -158,6 +159,7 @@ fn plan_anew(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Boun
         far_points: 0,
         points_min: None,
         workers: worker.map(|w| w.count),
+        layout: manifest::LAYOUT,
     };
     manifest::save(ws, &m)?;
     Ok(Planned { manifest: m, resumed: false })

@@ -528,7 +528,7 @@ fn options_out_of_range_are_refused_by_the_library_as_by_the_command_line() {
 }
 
 /// A run refused at its start leaves no run directory behind (it once left one holding only
-/// `lock`), and a finished run, lone or by workers, keeps no lock file.
+/// `lock`), and a finished or failed run, lone or by workers, keeps no lock file.
 #[test]
 fn no_lock_file_outlives_its_run() {
     let d = tmp();
@@ -547,6 +547,13 @@ fn no_lock_file_outlives_its_run() {
     let lone = d.path().join("lone");
     let (code, _, err) = crease(&["extract", las.to_str().unwrap(), "-o", lone.to_str().unwrap(), "-q"]);
     assert_eq!(code, 0, "{err}");
+    assert_eq!(locks(&lone), Vec::<String>::new());
+    // A run that fails midway (a tile of its store removed once its edge points are needed
+    // again) keeps none either.
+    std::fs::remove_file(lone.join("work/tiles/0.pts")).unwrap();
+    std::fs::remove_dir_all(lone.join("work/edges")).unwrap();
+    let (code, _, err) = crease(&["extract", las.to_str().unwrap(), "-o", lone.to_str().unwrap(), "-q"]);
+    assert_eq!(code, exit::DATA, "{err}");
     assert_eq!(locks(&lone), Vec::<String>::new());
     let shared = d.path().join("shared");
     for _ in 0..3 {

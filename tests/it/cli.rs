@@ -80,7 +80,8 @@ fn working_data_goes_to_the_work_dir_and_clean_removes_it() {
     stdout(&["extract", cube, "-o", &p("plain"), "-q"]);
     stdout(&["extract", cube, "-o", &p("run"), "-q", "--work-dir", &p("scratch")]);
     for working in ["tiles", "stats", "resid", "edges"] {
-        assert!(d.path().join("scratch").join(working).is_dir() && !d.path().join("run").join(working).exists(), "{working}");
+        assert!(d.path().join("scratch").join(working).is_dir() && d.path().join("plain/work").join(working).is_dir(), "{working}");
+        assert!(!d.path().join("run").join(working).exists() && !d.path().join("plain").join(working).exists(), "{working}");
     }
     let curves = |run: &str| std::fs::read(d.path().join(run).join("curves.obj")).unwrap();
     assert_eq!(curves("run"), curves("plain"));
@@ -113,21 +114,19 @@ fn working_data_goes_to_the_work_dir_and_clean_removes_it() {
     let before = curves("plain");
     stdout(&["extract", cube, "-o", &p("plain"), "-q", "--clean"]);
     assert_eq!(curves("plain"), before);
-    for working in ["tiles", "stats", "resid", "edges"] {
-        assert!(!d.path().join("plain").join(working).exists(), "{working}");
-    }
+    assert!(!d.path().join("plain/work").exists());
     assert!(stdout(&["status", &p("plain")]).contains("finished (working data removed)"));
     let (code, err) = run(&["extract", cube, "-o", &p("plain"), "-q"]);
     assert_eq!(code, Some(crease::error::exit::USAGE));
     assert!(err.contains("working data was removed (--clean)") && err.contains("--force"), "{err}");
     stdout(&["view", &p("plain")]);
     stdout(&["extract", cube, "-o", &p("plain"), "-q", "--force"]);
-    assert!(d.path().join("plain/tiles").is_dir());
+    assert!(d.path().join("plain/work/tiles").is_dir());
     // --force on a run with a work directory, without one: the old working data goes, the
     // new is in the run directory, and the run resumes from there.
     stdout(&["extract", cube, "-o", &p("moved"), "-q", "--work-dir", &p("scratch2")]);
     stdout(&["extract", cube, "-o", &p("moved"), "-q", "--force"]);
-    assert!(!d.path().join("scratch2/tiles").exists() && d.path().join("moved/tiles").is_dir());
+    assert!(!d.path().join("scratch2/tiles").exists() && d.path().join("moved/work/tiles").is_dir());
     stdout(&["extract", cube, "-o", &p("moved"), "-q", "--min-confidence", "0.3"]);
     assert!(stdout(&["status", &p("moved")]).contains("finished"));
 }
@@ -160,4 +159,47 @@ fn epsg_codes_outside_the_dataset_are_refused() {
         assert!(err.contains(&format!("{code} is outside the codes of the EPSG dataset")), "{code}: {err}");
         assert!(!out.exists(), "{code}: the run directory was created");
     }
+}
+
+/// A finished run directory holds its outputs, the manifest and `work/` at the top, and nothing
+/// else. A run directory of the older layout (its working data at the top, a manifest without
+/// `layout`) is resumed from there, not mixed with a new `work/`; `--force` starts it over in the
+/// new layout.
+#[test]
+fn the_run_directory_shows_its_outputs_and_reads_the_older_layout() {
+    let d = tempfile::tempdir().unwrap();
+    let run_dir = d.path().join("run");
+    let r = run_dir.to_str().unwrap();
+    let cube = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las");
+    let cube = cube.to_str().unwrap();
+    let names = |dir: &std::path::Path| {
+        let mut n: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        n.sort();
+        n
+    };
+    stdout(&["extract", cube, "-o", r, "-q"]);
+    let top = ["curves.geojson", "curves.obj", "curves.ply", "manifest.json", "preview.png", "report.json", "work"];
+    assert_eq!(names(&run_dir), top);
+    assert_eq!(names(&run_dir.join("work")), ["edges", "finished", "pieces", "resid", "smoothed", "stats", "survey", "tiles"]);
+    let curves = std::fs::read(run_dir.join("curves.obj")).unwrap();
+    // The same run in the older layout.
+    for e in std::fs::read_dir(run_dir.join("work")).unwrap() {
+        let e = e.unwrap();
+        std::fs::rename(e.path(), run_dir.join(e.file_name())).unwrap();
+    }
+    std::fs::remove_dir(run_dir.join("work")).unwrap();
+    let manifest = run_dir.join("manifest.json");
+    let mut m: serde_json::Value = serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+    assert_eq!(m["layout"], 1);
+    m.as_object_mut().unwrap().remove("layout");
+    std::fs::write(&manifest, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+    std::fs::remove_file(run_dir.join("curves.obj")).unwrap();
+    stdout(&["extract", cube, "-o", r, "-q", "--min-confidence", "0.5"]);
+    stdout(&["extract", cube, "-o", r, "-q"]);
+    assert_eq!(std::fs::read(run_dir.join("curves.obj")).unwrap(), curves);
+    assert!(!run_dir.join("work").exists() && run_dir.join("tiles").is_dir());
+    assert!(stdout(&["status", r]).contains("finished"));
+    stdout(&["extract", cube, "-o", r, "-q", "--force"]);
+    assert_eq!(names(&run_dir), top);
+    assert_eq!(std::fs::read(run_dir.join("curves.obj")).unwrap(), curves);
 }

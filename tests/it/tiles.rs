@@ -182,7 +182,7 @@ fn the_curve_stage_resumes_from_its_blocks() {
     };
     let (first, curves) = run(true);
     assert!(first.counts.blocks >= 6, "{} blocks", first.counts.blocks);
-    let piece = |b: u32| out.join(format!("pieces/{b}.bin"));
+    let piece = |b: u32| out.join(format!("work/pieces/{b}.bin"));
     let stamp = |b: u32| std::fs::metadata(piece(b)).unwrap().modified().unwrap();
     let kept = stamp(0);
     std::fs::remove_file(piece(1)).unwrap();
@@ -409,7 +409,7 @@ fn damaged_run_directory_files_are_repaired_or_named() {
     };
     assert!(run(&[]).status.success());
     let expect = outputs(&out);
-    for (file, offset) in [("edges/0.bin", 40), ("resid/0.bin", 40), ("edges/3.bin", 8)] {
+    for (file, offset) in [("work/edges/0.bin", 40), ("work/resid/0.bin", 40), ("work/edges/3.bin", 8)] {
         let path = flip(file, offset);
         let o = run(&[]);
         assert!(o.status.success(), "{file}: {}", String::from_utf8_lossy(&o.stderr));
@@ -428,13 +428,13 @@ fn damaged_run_directory_files_are_repaired_or_named() {
         assert!(run(&["--force"]).status.success());
         assert_eq!(outputs(&out), expect, "{}: --force gives the same outputs", path.display());
     };
-    let tile = flip("tiles/0.pts", 70);
-    std::fs::remove_file(out.join("edges/0.bin")).unwrap();
+    let tile = flip("work/tiles/0.pts", 70);
+    std::fs::remove_file(out.join("work/edges/0.bin")).unwrap();
     named(&tile);
     // A deleted tile file: its points are not silently dropped.
-    std::fs::remove_file(out.join("tiles/1.pts")).unwrap();
-    std::fs::remove_file(out.join("edges/1.bin")).unwrap();
-    named(&out.join("tiles/1.pts"));
+    std::fs::remove_file(out.join("work/tiles/1.pts")).unwrap();
+    std::fs::remove_file(out.join("work/edges/1.bin")).unwrap();
+    named(&out.join("work/tiles/1.pts"));
     named(&flip("manifest.json", 0));
 }
 
