@@ -16,7 +16,7 @@ impl Cancel {
     }
 
     /// True once stopping was asked for.
-    pub fn is_set(&self) -> bool {
+    pub(crate) fn is_set(&self) -> bool {
         self.0.load(Ordering::SeqCst)
     }
 

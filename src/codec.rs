@@ -16,15 +16,15 @@ use crate::error::{Error, Result};
 use std::path::Path;
 
 /// The four bytes every frame starts with.
-pub const MAGIC: [u8; 4] = *b"CRSE";
+pub(crate) const MAGIC: [u8; 4] = *b"CRSE";
 /// Layout version of every kind; raised when any layout changes.
-pub const FORMAT: u16 = 2;
+pub(crate) const FORMAT: u16 = 2;
 /// Bytes of a frame header.
-pub const HEADER: usize = 32;
+pub(crate) const HEADER: usize = 32;
 
 /// The header of one frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FrameHeader {
+pub(crate) struct FrameHeader {
     /// What the frame holds.
     pub kind: [u8; 4],
     /// Bytes of uncompressed metadata after the header.
@@ -39,7 +39,7 @@ pub struct FrameHeader {
 
 impl FrameHeader {
     /// Parses a header, checking the magic, the kind and the format.
-    pub fn parse(b: &[u8; HEADER], kind: [u8; 4], path: &Path) -> Result<FrameHeader> {
+    pub(crate) fn parse(b: &[u8; HEADER], kind: [u8; 4], path: &Path) -> Result<FrameHeader> {
         let mut r = Reader::new(b, path);
         let (magic, k) = (r.bytes4()?, r.bytes4()?);
         if magic != MAGIC {
@@ -65,7 +65,7 @@ impl FrameHeader {
     /// Checks the metadata and compressed payload against the checksum, then decompresses
     /// with `zd` (a reader of many frames keeps one decompressor: making one per frame cost
     /// more than decompressing the small frames of a tile store).
-    pub fn open(&self, meta: &[u8], zstd: &[u8], path: &Path, zd: &mut zstd::bulk::Decompressor) -> Result<Vec<u8>> {
+    pub(crate) fn open(&self, meta: &[u8], zstd: &[u8], path: &Path, zd: &mut zstd::bulk::Decompressor) -> Result<Vec<u8>> {
         let mut h = crc32fast::Hasher::new();
         h.update(meta);
         h.update(zstd);
@@ -90,7 +90,7 @@ fn name(k: [u8; 4]) -> String {
 
 /// Encodes one frame of kind `kind` with metadata `meta` and payload `raw` (compressed at
 /// zstd level 1, the speed the tile passes need).
-pub fn frame(kind: [u8; 4], meta: &[u8], raw: &[u8], zc: &mut zstd::bulk::Compressor) -> std::io::Result<Vec<u8>> {
+pub(crate) fn frame(kind: [u8; 4], meta: &[u8], raw: &[u8], zc: &mut zstd::bulk::Compressor) -> std::io::Result<Vec<u8>> {
     let z = zc.compress(raw)?;
     let mut h = crc32fast::Hasher::new();
     h.update(meta);
@@ -109,7 +109,7 @@ pub fn frame(kind: [u8; 4], meta: &[u8], raw: &[u8], zc: &mut zstd::bulk::Compre
 }
 
 /// Decodes a file that holds exactly one frame of kind `kind`: its payload.
-pub fn unframe(bytes: &[u8], kind: [u8; 4], path: &Path) -> Result<Vec<u8>> {
+pub(crate) fn unframe(bytes: &[u8], kind: [u8; 4], path: &Path) -> Result<Vec<u8>> {
     let head: &[u8; HEADER] = bytes.get(..HEADER).and_then(|h| h.try_into().ok()).ok_or_else(|| Error::damaged(path, "truncated"))?;
     let h = FrameHeader::parse(head, kind, path)?;
     if bytes.len() != HEADER + h.meta_len + h.zstd_len {
@@ -121,59 +121,59 @@ pub fn unframe(bytes: &[u8], kind: [u8; 4], path: &Path) -> Result<Vec<u8>> {
 
 /// A record being encoded: fields appended in little-endian order.
 #[derive(Default)]
-pub struct Writer(pub Vec<u8>);
+pub(crate) struct Writer(pub Vec<u8>);
 
 impl Writer {
     /// An empty record with room for `n` bytes.
-    pub fn with_capacity(n: usize) -> Writer {
+    pub(crate) fn with_capacity(n: usize) -> Writer {
         Writer(Vec::with_capacity(n))
     }
 
     /// Appends raw bytes.
-    pub fn bytes(&mut self, b: &[u8]) {
+    pub(crate) fn bytes(&mut self, b: &[u8]) {
         self.0.extend_from_slice(b);
     }
 
     /// Appends a u8.
-    pub fn u8(&mut self, v: u8) {
+    pub(crate) fn u8(&mut self, v: u8) {
         self.0.push(v);
     }
 
     /// Appends a u16.
-    pub fn u16(&mut self, v: u16) {
+    pub(crate) fn u16(&mut self, v: u16) {
         self.bytes(&v.to_le_bytes());
     }
 
     /// Appends a u32.
-    pub fn u32(&mut self, v: u32) {
+    pub(crate) fn u32(&mut self, v: u32) {
         self.bytes(&v.to_le_bytes());
     }
 
     /// Appends a u64.
-    pub fn u64(&mut self, v: u64) {
+    pub(crate) fn u64(&mut self, v: u64) {
         self.bytes(&v.to_le_bytes());
     }
 
     /// Appends an f32.
-    pub fn f32(&mut self, v: f32) {
+    pub(crate) fn f32(&mut self, v: f32) {
         self.bytes(&v.to_le_bytes());
     }
 
     /// Appends an f64.
-    pub fn f64(&mut self, v: f64) {
+    pub(crate) fn f64(&mut self, v: f64) {
         self.bytes(&v.to_le_bytes());
     }
 }
 
 /// A record being decoded: fields taken in order; running past the end is a damaged file.
-pub struct Reader<'a> {
+pub(crate) struct Reader<'a> {
     b: &'a [u8],
     path: &'a Path,
 }
 
 impl<'a> Reader<'a> {
     /// A reader over `b`, which came from `path` (named in errors).
-    pub fn new(b: &'a [u8], path: &'a Path) -> Reader<'a> {
+    pub(crate) fn new(b: &'a [u8], path: &'a Path) -> Reader<'a> {
         Reader { b, path }
     }
 
@@ -184,32 +184,32 @@ impl<'a> Reader<'a> {
     }
 
     /// Four raw bytes.
-    pub fn bytes4(&mut self) -> Result<[u8; 4]> {
+    pub(crate) fn bytes4(&mut self) -> Result<[u8; 4]> {
         self.take()
     }
 
     /// A u8.
-    pub fn u8(&mut self) -> Result<u8> {
+    pub(crate) fn u8(&mut self) -> Result<u8> {
         Ok(self.take::<1>()?[0])
     }
 
     /// A u16.
-    pub fn u16(&mut self) -> Result<u16> {
+    pub(crate) fn u16(&mut self) -> Result<u16> {
         self.take().map(u16::from_le_bytes)
     }
 
     /// A u32.
-    pub fn u32(&mut self) -> Result<u32> {
+    pub(crate) fn u32(&mut self) -> Result<u32> {
         self.take().map(u32::from_le_bytes)
     }
 
     /// A u64.
-    pub fn u64(&mut self) -> Result<u64> {
+    pub(crate) fn u64(&mut self) -> Result<u64> {
         self.take().map(u64::from_le_bytes)
     }
 
     /// A count of items of `size` bytes each that must fit in what is left.
-    pub fn count(&mut self, size: usize) -> Result<usize> {
+    pub(crate) fn count(&mut self, size: usize) -> Result<usize> {
         let n = self.u64()?;
         match usize::try_from(n).ok().filter(|&n| n.checked_mul(size).is_some_and(|b| b <= self.b.len())) {
             Some(n) => Ok(n),
@@ -218,17 +218,17 @@ impl<'a> Reader<'a> {
     }
 
     /// An f32.
-    pub fn f32(&mut self) -> Result<f32> {
+    pub(crate) fn f32(&mut self) -> Result<f32> {
         self.take().map(f32::from_le_bytes)
     }
 
     /// An f64.
-    pub fn f64(&mut self) -> Result<f64> {
+    pub(crate) fn f64(&mut self) -> Result<f64> {
         self.take().map(f64::from_le_bytes)
     }
 
     /// Checks that the whole record was read.
-    pub fn finish(self) -> Result<()> {
+    pub(crate) fn finish(self) -> Result<()> {
         if self.b.is_empty() {
             Ok(())
         } else {

@@ -26,7 +26,7 @@ pub struct Crs {
 /// The range the EPSG dataset's codes lie in (it reserves 1 to 32767, and its coordinate
 /// reference systems start at 1024): a code outside it is a typing slip or another
 /// authority's (ESRI's 102100), which a reader would take for an EPSG code that does not exist.
-pub const EPSG_CODES: std::ops::RangeInclusive<u32> = 1024..=32767;
+pub(crate) const EPSG_CODES: std::ops::RangeInclusive<u32> = 1024..=32767;
 
 impl Crs {
     /// True if nothing is known of the CRS.
@@ -132,7 +132,7 @@ impl Crs {
 
     /// The CRS that a LAS file's records give. `records` are the (user id, record id, data)
     /// of every VLR and EVLR, in file order; `wkt_bit` is bit 4 of the global encoding.
-    pub fn from_las_records<'a>(records: impl IntoIterator<Item = (&'a str, u16, &'a [u8])>, wkt_bit: bool) -> Crs {
+    pub(crate) fn from_las_records<'a>(records: impl IntoIterator<Item = (&'a str, u16, &'a [u8])>, wkt_bit: bool) -> Crs {
         let (mut wkt, mut keys) = (None, None);
         for (user, id, data) in records {
             if user != "LASF_Projection" {

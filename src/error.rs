@@ -66,7 +66,7 @@ impl Error {
     }
 
     /// An input error about `path` with its cause.
-    pub fn input_from(path: impl AsRef<Path>, msg: impl Into<String>, source: impl Into<Cause>) -> Self {
+    pub(crate) fn input_from(path: impl AsRef<Path>, msg: impl Into<String>, source: impl Into<Cause>) -> Self {
         Error::Input { path: path.as_ref().to_path_buf(), msg: msg.into(), source: Some(source.into()) }
     }
 
@@ -118,7 +118,7 @@ pub mod exit {
 
 /// Turns an I/O error while reading `path` into an input error with a readable message,
 /// keeping the I/O error as its cause.
-pub fn io_input(path: &Path, e: std::io::Error) -> Error {
+pub(crate) fn io_input(path: &Path, e: std::io::Error) -> Error {
     let msg = match e.kind() {
         std::io::ErrorKind::NotFound => "no such file or directory".to_string(),
         std::io::ErrorKind::PermissionDenied => "permission denied".to_string(),
@@ -129,6 +129,6 @@ pub fn io_input(path: &Path, e: std::io::Error) -> Error {
 }
 
 /// The message a panic carried.
-pub fn panic_message(payload: &Box<dyn std::any::Any + Send>) -> String {
+pub(crate) fn panic_message(payload: &Box<dyn std::any::Any + Send>) -> String {
     payload.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| payload.downcast_ref::<String>().cloned()).unwrap_or_else(|| "no message".to_string())
 }

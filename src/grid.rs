@@ -7,13 +7,13 @@ use std::collections::HashMap;
 
 /// The cell of side `side` holding position `p` (cells are half-open, `[k side, (k+1) side)`).
 #[inline]
-pub fn cell(p: DVec3, side: f64) -> I64Vec3 {
+pub(crate) fn cell(p: DVec3, side: f64) -> I64Vec3 {
     (p / side).floor().as_i64vec3()
 }
 
 /// A uniform hash grid over positions: a query visits every cell a ball touches, so the cost
 /// of a lookup does not grow with the number of items.
-pub struct HashGrid<T> {
+pub(crate) struct HashGrid<T> {
     side: f64,
     /// Each cell's last item added, as an index into `items`.
     heads: HashMap<I64Vec3, u32>,
@@ -28,12 +28,12 @@ const NONE: u32 = u32::MAX;
 
 impl<T: Copy> HashGrid<T> {
     /// An empty grid of cells of side `side`.
-    pub fn new(side: f64) -> HashGrid<T> {
+    pub(crate) fn new(side: f64) -> HashGrid<T> {
         HashGrid { side: side.max(f64::MIN_POSITIVE), heads: HashMap::new(), items: vec![] }
     }
 
     /// Adds item `t` at `p`.
-    pub fn insert(&mut self, p: DVec3, t: T) {
+    pub(crate) fn insert(&mut self, p: DVec3, t: T) {
         let before = self.heads.insert(cell(p, self.side), self.items.len() as u32).unwrap_or(NONE);
         self.items.push((t, before));
     }
@@ -41,7 +41,7 @@ impl<T: Copy> HashGrid<T> {
     /// Calls `f` for every item in the cells that the ball of radius `r` around `p` touches
     /// (a superset of the items within `r`; callers test the distance), each cell's from the
     /// last added (callers that pick one item break ties by a total order).
-    pub fn near(&self, p: DVec3, r: f64, mut f: impl FnMut(T)) {
+    pub(crate) fn near(&self, p: DVec3, r: f64, mut f: impl FnMut(T)) {
         let (lo, hi) = (cell(p - DVec3::splat(r), self.side), cell(p + DVec3::splat(r), self.side));
         for x in lo.x..=hi.x {
             for y in lo.y..=hi.y {

@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 /// Points read from each file to estimate the spacing.
-pub const SPACING_SAMPLE: usize = 100_000;
+pub(crate) const SPACING_SAMPLE: usize = 100_000;
 
 /// What `crease info` reports about one file.
 #[derive(Clone, Debug, Serialize)]
@@ -24,7 +24,7 @@ pub struct FileInfo {
 }
 
 /// Reads the header of `path` and estimates its point spacing from the first
-/// [`SPACING_SAMPLE`] points. For PLY files the bounds come from a full read, since PLY headers
+/// `SPACING_SAMPLE` points. For PLY files the bounds come from a full read, since PLY headers
 /// do not store them.
 ///
 /// ```no_run
@@ -53,7 +53,7 @@ pub fn file_info(path: &Path) -> Result<FileInfo> {
 /// so a block is a dense patch; synthetic or shuffled files give a thinned random subsample.
 /// Both are handled by comparing the block's share of the points with its share of the area
 /// (areas from the two largest extents of the bounding boxes), assuming even density.
-pub fn estimate_spacing(block: &[DVec3], total: u64, bounds: &Bounds) -> f64 {
+pub(crate) fn estimate_spacing(block: &[DVec3], total: u64, bounds: &Bounds) -> f64 {
     let d = crate::spacing::spacing(block, 20_000);
     if block.len() < 2 || total == 0 || bounds.is_empty() {
         return d;

@@ -12,7 +12,7 @@ use crate::rng::Rng;
 use glam::DVec3;
 
 /// FNV-1a, 64 bit: a stable content hash (std's hasher may change between Rust versions).
-pub fn fnv1a(bytes: &[u8]) -> u64 {
+pub(crate) fn fnv1a(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for &b in bytes {
         h ^= b as u64;
@@ -23,14 +23,14 @@ pub fn fnv1a(bytes: &[u8]) -> u64 {
 
 /// The quantum of [`position_key`] for a cloud with bounding-box diagonal `diag`: a power of
 /// two near a billionth of it, so that clouds whose bounds differ in the last bits agree.
-pub fn key_quantum(diag: f64) -> f64 {
+pub(crate) fn key_quantum(diag: f64) -> f64 {
     2f64.powi((diag.max(1e-300) * 1e-9).log2().floor() as i32)
 }
 
 /// A point's identity from its position (rounded to `q`): the same point gets the same key
 /// whichever file, tile or order it comes in, so sampling and thinning by key are independent
 /// of how a cloud is split.
-pub fn position_key(p: DVec3, q: f64) -> u64 {
+pub(crate) fn position_key(p: DVec3, q: f64) -> u64 {
     let w = (p / q).round();
     let mut bytes = [0u8; 24];
     for (k, v) in w.to_array().iter().enumerate() {
@@ -40,7 +40,7 @@ pub fn position_key(p: DVec3, q: f64) -> u64 {
 }
 
 /// True if the point with key `id` belongs to the share `keep` of a cloud thinned by key.
-pub fn keep_point(id: u64, keep: f64, seed: u64) -> bool {
+pub(crate) fn keep_point(id: u64, keep: f64, seed: u64) -> bool {
     if keep >= 1.0 {
         return true;
     }
@@ -52,12 +52,12 @@ pub fn keep_point(id: u64, keep: f64, seed: u64) -> bool {
 /// spacing. Positions computed in differently placed tiles differ in their last bits, and the
 /// curve stages are discrete (seed order, cone tests); snapped, their input, and so the
 /// curves, are the same for any tiling.
-pub fn snap_quantum(kappa: f64) -> f64 {
+pub(crate) fn snap_quantum(kappa: f64) -> f64 {
     kappa / 4096.0
 }
 
 /// `p` on the snapping grid of quantum `q`.
-pub fn snap(p: DVec3, q: f64) -> DVec3 {
+pub(crate) fn snap(p: DVec3, q: f64) -> DVec3 {
     // (+ 0.0 turns a negative zero, whose sign is rounding noise, into zero.)
     (p / q).round() * q + DVec3::ZERO
 }
@@ -67,7 +67,7 @@ pub fn snap(p: DVec3, q: f64) -> DVec3 {
 /// where a tile's origin lies; rounded, they come out the same in any tiling (unless two
 /// values straddle a rounding boundary, a chance of about one in a billion), so that no
 /// candidate or projection decides differently because of the tiling.
-pub fn settle(x: f64) -> f64 {
+pub(crate) fn settle(x: f64) -> f64 {
     if !x.is_finite() {
         return x;
     }
@@ -77,7 +77,7 @@ pub fn settle(x: f64) -> f64 {
 }
 
 /// Sorting key of a snapped position: its bits (equal means identical).
-pub fn bits_key(p: DVec3) -> [u64; 3] {
+pub(crate) fn bits_key(p: DVec3) -> [u64; 3] {
     p.to_array().map(f64::to_bits)
 }
 

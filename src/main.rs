@@ -93,11 +93,11 @@ struct ParamArgs {
     /// ball split into the pieces of surface that the band of candidates separates, each
     /// searched on its own (experimental).
     #[arg(long, value_name = "MODEL", value_parser = parse_model)]
-    model: Option<crease::extract::params::Model>,
+    model: Option<crease::extract::Model>,
 }
 
-fn parse_model(s: &str) -> Result<crease::extract::params::Model, String> {
-    crease::extract::params::Model::parse(s).ok_or_else(|| format!("'{s}' is not a model: balls, cells or patches"))
+fn parse_model(s: &str) -> Result<crease::extract::Model, String> {
+    crease::extract::Model::parse(s).ok_or_else(|| format!("'{s}' is not a model: balls, cells or patches"))
 }
 
 impl ParamArgs {
@@ -491,7 +491,7 @@ struct ExtractArgs {
     quiet: bool,
     /// Side of the curve stage's growth blocks, in polyline steps (for tests and
     /// measurements of the stitcher).
-    #[arg(long, hide = true, default_value_t = crease::extract::blocks::BASE_STEPS)]
+    #[arg(long, hide = true, default_value_t = crease::extract::BASE_STEPS)]
     block_steps: f64,
     /// Write the intermediate point sets (candidates per tile, edge cloud, smoothed edge
     /// cloud, corners, grown polylines) to this directory as OBJ files (also taken from
@@ -501,7 +501,7 @@ struct ExtractArgs {
     /// Leave out curves whose confidence (0 to 1, written to every output) is below this:
     /// higher trades recall for precision. Changing it on a finished run rewrites the
     /// outputs without recomputing the tiles.
-    #[arg(long, default_value_t = crease::extract::polylines::DEFAULT_MIN_CONFIDENCE)]
+    #[arg(long, default_value_t = crease::extract::DEFAULT_MIN_CONFIDENCE)]
     min_confidence: f64,
     /// Leave out curves shorter than this, in model units.
     #[arg(long, default_value_t = 0.0)]
@@ -723,18 +723,17 @@ fn synth_cmd(what: SynthCmd) -> Result<(), Error> {
     let t = Instant::now();
     let (out, n) = match what {
         SynthCmd::Shape { name, angle, sample } => {
-            let shape = synth::shapes::shape(&name, angle)
-                .ok_or_else(|| Error::Usage(format!("unknown shape '{name}' (one of: {})", synth::shapes::SHAPES.join(", "))))?;
+            let shape = synth::shape(&name, angle).ok_or_else(|| Error::Usage(format!("unknown shape '{name}' (one of: {})", synth::SHAPES.join(", "))))?;
             let n = synth::write_sampled(&shape, &sample.options()?, &sample.o)?;
             (sample.o, n as u64)
         }
         SynthCmd::Mesh { file, angle, sample } => {
-            let mesh = synth::mesh::read_mesh(&file)?;
+            let mesh = synth::read_mesh(&file)?;
             let n = synth::write_sampled(&mesh.to_shape(angle), &sample.options()?, &sample.o)?;
             (sample.o, n as u64)
         }
         SynthCmd::Scene { n, noise, seed, clutter, o } => {
-            let n = synth::scene::write_scene(&synth::scene::SceneOptions { n, noise, seed, clutter }, &o)?;
+            let n = synth::write_scene(&synth::SceneOptions { n, noise, seed, clutter }, &o)?;
             (o, n)
         }
     };

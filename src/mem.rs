@@ -8,14 +8,14 @@ pub fn peak_rss() -> u64 {
 /// The peak resident set size of a stretch of work, sampled every few milliseconds by a thread
 /// of its own. (The kernel's own peak could be started again instead, but then tools that read
 /// it for the whole process, such as `time -v`, would see only the last stretch.)
-pub struct PeakSampler {
+pub(crate) struct PeakSampler {
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     thread: Option<std::thread::JoinHandle<u64>>,
 }
 
 impl PeakSampler {
     /// Starts sampling.
-    pub fn start() -> PeakSampler {
+    pub(crate) fn start() -> PeakSampler {
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let flag = stop.clone();
         let thread = std::thread::Builder::new()
@@ -33,7 +33,7 @@ impl PeakSampler {
     }
 
     /// Stops sampling; the largest resident set size seen, bytes (0 where unavailable).
-    pub fn finish(mut self) -> u64 {
+    pub(crate) fn finish(mut self) -> u64 {
         self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
         let last = current_rss();
         self.thread.take().and_then(|t| t.join().ok()).unwrap_or(0).max(last)
@@ -47,12 +47,12 @@ impl Drop for PeakSampler {
 }
 
 /// Current resident set size in bytes (VmRSS), or 0 where unavailable.
-pub fn current_rss() -> u64 {
+pub(crate) fn current_rss() -> u64 {
     status_kib("VmRSS:") * 1024
 }
 
 /// Physical memory of the machine in bytes (MemTotal), or 0 where unavailable.
-pub fn total_memory() -> u64 {
+pub(crate) fn total_memory() -> u64 {
     std::fs::read_to_string("/proc/meminfo")
         .ok()
         .and_then(|s| s.lines().find(|l| l.starts_with("MemTotal:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok()))
@@ -85,7 +85,7 @@ pub fn map_large_blocks_apart() {
 /// keep it (glibc keeps the freed blocks of every thread's arena mapped). Called between the
 /// tile passes and the curve stage, so that the memory the tile passes used is not counted a
 /// second time, under a memory limit, on top of the curve stage's.
-pub fn release_free_memory() {
+pub(crate) fn release_free_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: malloc_trim only releases free pages of the allocator's own heaps.
     unsafe {

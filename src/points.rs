@@ -15,7 +15,7 @@ pub struct Bounds {
 
 impl Bounds {
     /// The empty box: growing it by any point gives that point's box.
-    pub const EMPTY: Bounds = Bounds { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] };
+    pub(crate) const EMPTY: Bounds = Bounds { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] };
 
     /// The box `--bounds` gives (and the Python binding's `bounds=`): XMIN,YMIN,XMAX,YMAX (any
     /// height) or XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX.
@@ -42,19 +42,19 @@ impl Bounds {
 
     /// True if the box holds something and every bound is finite, with min <= max on each axis
     /// (a box read from a header may be none of these).
-    pub fn is_usable(&self) -> bool {
+    pub(crate) fn is_usable(&self) -> bool {
         (0..3).all(|a| self.min[a].is_finite() && self.max[a].is_finite() && self.min[a] <= self.max[a])
     }
 
     /// Grows the box to hold `p`.
     #[inline]
-    pub fn grow(&mut self, p: DVec3) {
+    pub(crate) fn grow(&mut self, p: DVec3) {
         self.min = DVec3::from(self.min).min(p).to_array();
         self.max = DVec3::from(self.max).max(p).to_array();
     }
 
     /// Grows the box to hold `other`.
-    pub fn union(&mut self, other: &Bounds) {
+    pub(crate) fn union(&mut self, other: &Bounds) {
         for i in 0..3 {
             self.min[i] = self.min[i].min(other.min[i]);
             self.max[i] = self.max[i].max(other.max[i]);
@@ -68,12 +68,12 @@ impl Bounds {
     }
 
     /// True if the two boxes share a point (faces included).
-    pub fn meets(&self, other: &Bounds) -> bool {
+    pub(crate) fn meets(&self, other: &Bounds) -> bool {
         (0..3).all(|a| self.min[a] <= other.max[a] && other.min[a] <= self.max[a])
     }
 
     /// The part of the box inside `other` (empty if they do not meet).
-    pub fn intersection(&self, other: &Bounds) -> Bounds {
+    pub(crate) fn intersection(&self, other: &Bounds) -> Bounds {
         if !self.meets(other) {
             return Bounds::EMPTY;
         }
@@ -82,7 +82,7 @@ impl Bounds {
 
     /// The box as its three ranges, for messages: "x 0 to 2, y -0.2 to 0.9, any z" (an axis
     /// from -f64::MAX to f64::MAX is "any").
-    pub fn ranges(&self) -> String {
+    pub(crate) fn ranges(&self) -> String {
         let axis = |a: usize, name: &str| {
             if self.min[a] <= -f64::MAX && self.max[a] >= f64::MAX {
                 format!("any {name}")
@@ -132,7 +132,7 @@ pub enum FileFormat {
 impl FileFormat {
     /// True if the format's header states the points' bounds (LAS, LAZ); the others' come
     /// from reading the points.
-    pub fn has_header_bounds(self) -> bool {
+    pub(crate) fn has_header_bounds(self) -> bool {
         matches!(self, FileFormat::Las | FileFormat::Laz)
     }
 }
@@ -220,7 +220,7 @@ impl PointChunk {
     }
 
     /// Keeps only the points for which `keep` holds, in order.
-    pub fn retain(&mut self, keep: impl Fn(DVec3) -> bool) {
+    pub(crate) fn retain(&mut self, keep: impl Fn(DVec3) -> bool) {
         let mut k = 0;
         for i in 0..self.len() {
             if keep(self.xyz[i]) {
@@ -245,7 +245,7 @@ impl PointChunk {
 
 /// Points of a tile: world positions and global ids.
 #[derive(Clone, Debug, Default)]
-pub struct TilePoints {
+pub(crate) struct TilePoints {
     /// Positions.
     pub xyz: Vec<DVec3>,
     /// Global ids.

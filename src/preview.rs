@@ -8,12 +8,12 @@ use glam::{DMat3, DVec3};
 use std::path::Path;
 
 /// Side of each view, in pixels.
-pub const SIDE: usize = 800;
+pub(crate) const SIDE: usize = 800;
 /// About this many points of a cloud are drawn.
-pub const PREVIEW_POINTS: f64 = 1_000_000.0;
+pub(crate) const PREVIEW_POINTS: f64 = 1_000_000.0;
 
 /// An RGB image.
-pub struct Image {
+pub(crate) struct Image {
     /// Width in pixels.
     pub width: usize,
     /// Height in pixels.
@@ -36,18 +36,7 @@ impl Image {
 }
 
 /// The two views of `points` and `curves` (world coordinates), side by side.
-///
-/// ```
-/// use crease::curves::Polyline;
-/// use glam::DVec3;
-///
-/// let points: Vec<DVec3> = (0..10_000).map(|i| DVec3::new((i % 100) as f64, (i / 100) as f64, 0.0)).collect();
-/// let curves = [Polyline::from_points(0, [DVec3::ZERO, DVec3::new(99.0, 0.0, 0.0)])];
-/// let image = crease::preview::render(&points, &curves[..])?;
-/// assert_eq!((image.width, image.height), (2 * crease::preview::SIDE, crease::preview::SIDE));
-/// # Ok::<(), crease::Error>(())
-/// ```
-pub fn render(points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<Image> {
+pub(crate) fn render(points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<Image> {
     let mut image = Image::new(2 * SIDE, SIDE);
     // Top: looking down. Oblique: turned 30 degrees about the vertical, tilted to look down at
     // 35 degrees.
@@ -59,7 +48,7 @@ pub fn render(points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<Image
 }
 
 /// Writes the preview of `points` and `curves` to `path` as PNG.
-pub fn write_png(path: &Path, points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<()> {
+pub(crate) fn write_png(path: &Path, points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<()> {
     let image = render(points, curves)?;
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(f), image.width as u32, image.height as u32);
@@ -181,5 +170,17 @@ mod tests {
         let row = (SIDE as f64 * 0.96) as usize;
         let coloured = (0..SIDE).filter(|&x| (row - 2..=row + 1).any(|y| at(x, y) == curve_colour(3))).count();
         assert!(coloured > SIDE / 2, "{coloured} pixels of the curve");
+    }
+
+    #[test]
+    fn render_makes_two_views_side_by_side() -> crate::Result<()> {
+        use crate::curves::Polyline;
+        use glam::DVec3;
+
+        let points: Vec<DVec3> = (0..10_000).map(|i| DVec3::new((i % 100) as f64, (i / 100) as f64, 0.0)).collect();
+        let curves = [Polyline::from_points(0, [DVec3::ZERO, DVec3::new(99.0, 0.0, 0.0)])];
+        let image = crate::preview::render(&points, &curves[..])?;
+        assert_eq!((image.width, image.height), (2 * crate::preview::SIDE, crate::preview::SIDE));
+        Ok(())
     }
 }

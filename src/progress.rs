@@ -65,7 +65,7 @@ pub enum Mode {
 }
 
 /// A progress reporter.
-pub struct Progress {
+pub(crate) struct Progress {
     mode: Mode,
     terminal: bool,
     watch: Option<Watch>,
@@ -73,12 +73,12 @@ pub struct Progress {
 
 impl Progress {
     /// A reporter for `mode`, telling `watch` too, if given.
-    pub fn new(mode: Mode, watch: Option<Watch>) -> Progress {
+    pub(crate) fn new(mode: Mode, watch: Option<Watch>) -> Progress {
         Progress { mode, terminal: std::io::stderr().is_terminal(), watch }
     }
 
     /// A bar for one stage of `total` units.
-    pub fn bar(&self, stage: &str, total: u64, unit: &str) -> Bar {
+    pub(crate) fn bar(&self, stage: &str, total: u64, unit: &str) -> Bar {
         if let Some(w) = &self.watch {
             w.begin(stage, total, unit);
         }
@@ -110,7 +110,7 @@ fn counted(total: u64, unit: &str) -> String {
 }
 
 /// Progress of one stage.
-pub struct Bar {
+pub(crate) struct Bar {
     pb: Option<ProgressBar>,
     /// Off a terminal: (stage start, last line, done).
     log: Option<Mutex<(Instant, Instant, u64)>>,
@@ -122,7 +122,7 @@ pub struct Bar {
 
 impl Bar {
     /// Counts `n` more units done.
-    pub fn inc(&self, n: u64) {
+    pub(crate) fn inc(&self, n: u64) {
         if let Some(w) = &self.watch {
             w.0.done.fetch_add(n, Ordering::Relaxed);
         }
@@ -139,7 +139,7 @@ impl Bar {
     }
 
     /// Ends the stage.
-    pub fn finish(&self) {
+    pub(crate) fn finish(&self) {
         if let Some(w) = &self.watch {
             w.0.done.store(self.total, Ordering::Relaxed);
         }

@@ -5,23 +5,23 @@ use glam::DVec3;
 
 /// SplitMix64: fast, statistically sound for sampling, and fully specified.
 #[derive(Clone, Debug)]
-pub struct Rng(u64);
+pub(crate) struct Rng(u64);
 
 impl Rng {
     /// A generator seeded with `seed`.
-    pub fn new(seed: u64) -> Rng {
+    pub(crate) fn new(seed: u64) -> Rng {
         Rng(seed ^ 0x9E37_79B9_7F4A_7C15)
     }
 
     /// A generator for sub-stream `k` of `seed` (independent streams for blocks and objects).
-    pub fn stream(seed: u64, k: u64) -> Rng {
+    pub(crate) fn stream(seed: u64, k: u64) -> Rng {
         let mut r = Rng::new(seed.wrapping_add(k.wrapping_mul(0xD1B5_4A32_D192_ED03)));
         r.next_u64();
         r
     }
 
     /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
+    pub(crate) fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -30,17 +30,17 @@ impl Rng {
     }
 
     /// Uniform in [0, 1).
-    pub fn f64(&mut self) -> f64 {
+    pub(crate) fn f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
 
     /// Uniform in [a, b).
-    pub fn range(&mut self, a: f64, b: f64) -> f64 {
+    pub(crate) fn range(&mut self, a: f64, b: f64) -> f64 {
         a + (b - a) * self.f64()
     }
 
     /// Uniform in the ball of radius `r`.
-    pub fn in_ball(&mut self, r: f64) -> DVec3 {
+    pub(crate) fn in_ball(&mut self, r: f64) -> DVec3 {
         loop {
             let v = DVec3::new(self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0));
             if v.length_squared() <= 1.0 {

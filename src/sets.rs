@@ -3,13 +3,13 @@
 
 /// Disjoint sets over the items `0..n`; each set's root is its smallest item, so the sets
 /// come out the same whatever order the links were made in.
-pub struct Sets {
+pub(crate) struct Sets {
     parent: Vec<u32>,
 }
 
 impl Sets {
     /// `n` items, each a set of its own.
-    pub fn new(n: usize) -> Sets {
+    pub(crate) fn new(n: usize) -> Sets {
         Sets { parent: (0..n as u32).collect() }
     }
 
@@ -24,13 +24,13 @@ impl Sets {
     }
 
     /// Joins the sets of `a` and `b`.
-    pub fn union(&mut self, a: u32, b: u32) {
+    pub(crate) fn union(&mut self, a: u32, b: u32) {
         let (a, b) = (self.root(a), self.root(b));
         self.parent[a.max(b) as usize] = a.min(b);
     }
 
     /// The sets, each its items in order, in the order of their first items.
-    pub fn sets(mut self) -> Vec<Vec<u32>> {
+    pub(crate) fn sets(mut self) -> Vec<Vec<u32>> {
         let n = self.parent.len();
         let mut at: Vec<u32> = vec![u32::MAX; n];
         let mut out: Vec<Vec<u32>> = vec![];

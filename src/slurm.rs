@@ -17,7 +17,8 @@ use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// The jobs of the chain, in order: name, and whether it is an array of all the workers.
-pub const JOBS: [(&str, bool); 6] = [("plan", false), ("statistics", true), ("residuals", true), ("projection", true), ("growing", true), ("curves", false)];
+pub(crate) const JOBS: [(&str, bool); 6] =
+    [("plan", false), ("statistics", true), ("residuals", true), ("projection", true), ("growing", true), ("curves", false)];
 
 /// What the chain runs.
 #[derive(Clone, Debug)]

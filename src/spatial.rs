@@ -7,7 +7,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::num::NonZero;
 
 /// A static k-d tree over 3D points, answering radius and k-nearest queries by point index.
-pub struct Index {
+pub(crate) struct Index {
     tree: ImmutableKdTree<f32, 3>,
 }
 
@@ -17,14 +17,14 @@ impl Index {
     /// The build is serial: trees are built on the tile loader thread while the rayon pool
     /// computes the tile before, and kiddo's parallel build (the default from 262 144
     /// points) would queue behind that work instead of overlapping it.
-    pub fn new(points: &[[f32; 3]]) -> Index {
+    pub(crate) fn new(points: &[[f32; 3]]) -> Index {
         let tree = ImmutableKdTree::builder().with_serial_construction().build_from_slice(points).expect("k-d tree construction");
         Index { tree }
     }
 
     /// As [`Index::new`], but large trees are built in parallel on the rayon pool: for callers
     /// whose pool would otherwise wait for the tree. The tree is the same.
-    pub fn new_parallel(points: &[[f32; 3]]) -> Index {
+    pub(crate) fn new_parallel(points: &[[f32; 3]]) -> Index {
         let tree = ImmutableKdTree::builder().build_from_slice(points).expect("k-d tree construction");
         Index { tree }
     }
@@ -32,13 +32,13 @@ impl Index {
     /// Appends to `out` the index and squared distance of every point within `radius` of `q`,
     /// in no particular order.
     #[inline]
-    pub fn within(&self, q: &[f32; 3], radius: f32, out: &mut Vec<(u32, f32)>) {
+    pub(crate) fn within(&self, q: &[f32; 3], radius: f32, out: &mut Vec<(u32, f32)>) {
         self.tree.query(q).within::<SquaredEuclidean<f32>>(radius * radius).unsorted().visit(|r| out.push((r.item, r.distance)));
     }
 
     /// Index and squared distance of the `k` points nearest to `q`, nearest first.
     #[inline]
-    pub fn nearest_n(&self, q: &[f32; 3], k: usize, out: &mut Vec<(u32, f32)>) {
+    pub(crate) fn nearest_n(&self, q: &[f32; 3], k: usize, out: &mut Vec<(u32, f32)>) {
         let Some(k) = NonZero::new(k) else { return };
         for r in self.tree.query(q).nearest_n::<SquaredEuclidean<f32>>(k).execute() {
             out.push((r.item, r.distance));
@@ -48,7 +48,7 @@ impl Index {
     /// Index and squared distance of the (at most) `k` points nearest to `q` within `radius`,
     /// nearest first. Far cheaper than [`Index::nearest_n`] where the radius prunes.
     #[inline]
-    pub fn nearest_n_within(&self, q: &[f32; 3], k: usize, radius: f32, out: &mut Vec<(u32, f32)>) {
+    pub(crate) fn nearest_n_within(&self, q: &[f32; 3], k: usize, radius: f32, out: &mut Vec<(u32, f32)>) {
         let Some(k) = NonZero::new(k) else { return };
         for r in self.tree.query(q).nearest_n::<SquaredEuclidean<f32>>(k).within(radius * radius).execute() {
             out.push((r.item, r.distance));
@@ -56,12 +56,12 @@ impl Index {
     }
 
     /// Number of points in the tree.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.tree.size()
     }
 
     /// True if the tree holds no point.
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.len() == 0
     }
 }

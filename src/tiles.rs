@@ -7,7 +7,7 @@
 
 use crate::codec;
 use crate::error::{Error, Result};
-pub use crate::points::TilePoints;
+pub(crate) use crate::points::TilePoints;
 use crate::points::{Bounds, PointChunk};
 use crate::workspace::Workspace;
 use glam::DVec3;
@@ -22,11 +22,11 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
 /// bucketing, a file, its halo reads): a million tiles of a small cube took minutes. Grids
 /// planned from `--memory` hold about one tile per 10 k-2 M points, so a billion points need
 /// at most about 100 k.
-pub const MAX_TILES: u64 = 1 << 18;
+pub(crate) const MAX_TILES: u64 = 1 << 18;
 
 /// A regular grid of cubic (3D) or square-column (2D, one layer in z) tiles.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Grid {
+pub(crate) struct Grid {
     /// Minimum corner.
     pub origin: [f64; 3],
     /// Tile edge length (x and y; z too unless the grid is 2D).
@@ -40,7 +40,7 @@ pub struct Grid {
 impl Grid {
     /// A grid over `b` with tiles of edge `size`; 2D (one layer) when the cloud is flat
     /// compared with its footprint, as airborne scans are.
-    pub fn new(b: &Bounds, size: f64) -> Grid {
+    pub(crate) fn new(b: &Bounds, size: f64) -> Grid {
         let ext = DVec3::from(b.max) - DVec3::from(b.min);
         let flat = ext.z < 0.25 * ext.x.max(ext.y);
         let n = |e: f64| ((e / size).floor() as u32 + 1).max(1);
@@ -49,26 +49,21 @@ impl Grid {
     }
 
     /// The box the grid's tiles span (the 2D grid's layer in z).
-    pub fn span(&self) -> Bounds {
+    pub(crate) fn span(&self) -> Bounds {
         let height = if self.dims[2] == 1 && self.layer > 0.0 { self.layer } else { self.dims[2] as f64 * self.size };
         let ext = [self.dims[0] as f64 * self.size, self.dims[1] as f64 * self.size, height];
         Bounds { min: self.origin, max: std::array::from_fn(|a| self.origin[a] + ext[a]) }
     }
 
     /// Number of tiles.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.tiles().min(usize::MAX as u64) as usize
     }
 
     /// Number of tiles, without overflow (a grid may be planned with more than tile ids hold:
     /// see [`MAX_TILES`]).
-    pub fn tiles(&self) -> u64 {
+    pub(crate) fn tiles(&self) -> u64 {
         self.dims.iter().map(|&d| d as u64).product()
-    }
-
-    /// True if the grid has no tile.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
     }
 
     fn cell(&self, v: f64, axis: usize) -> u32 {
@@ -77,7 +72,7 @@ impl Grid {
     }
 
     /// The tile whose core holds `p`.
-    pub fn tile_of(&self, p: DVec3) -> u32 {
+    pub(crate) fn tile_of(&self, p: DVec3) -> u32 {
         let (i, j) = (self.cell(p.x, 0), self.cell(p.y, 1));
         let k = if self.dims[2] == 1 { 0 } else { self.cell(p.z, 2) };
         (k * self.dims[1] + j) * self.dims[0] + i
@@ -89,7 +84,7 @@ impl Grid {
 
     /// The core box of tile `t` (tiles on the grid's edge extend to infinity outwards, so
     /// every point has exactly one owner).
-    pub fn core(&self, t: u32) -> Bounds {
+    pub(crate) fn core(&self, t: u32) -> Bounds {
         let c = self.coords(t);
         let mut b = Bounds { min: [0.0; 3], max: [0.0; 3] };
         for (a, &c) in c.iter().enumerate() {
@@ -101,7 +96,7 @@ impl Grid {
     }
 
     /// Tiles whose cores come within `halo` of tile `t`'s core (including `t`).
-    pub fn around(&self, t: u32, halo: f64) -> Vec<u32> {
+    pub(crate) fn around(&self, t: u32, halo: f64) -> Vec<u32> {
         let c = self.coords(t);
         // (Only tiles of the grid are visited: a halo many tiles wide, or a tile size so small
         // that the ratio overflows, costs no more than the grid has tiles.)
@@ -124,7 +119,7 @@ impl Grid {
 }
 
 /// True if `p` lies in `b` grown by `halo`.
-pub fn within(b: &Bounds, halo: f64, p: DVec3) -> bool {
+pub(crate) fn within(b: &Bounds, halo: f64, p: DVec3) -> bool {
     (0..3).all(|a| p[a] >= b.min[a] - halo && p[a] < b.max[a] + halo)
 }
 
@@ -132,7 +127,7 @@ pub fn within(b: &Bounds, halo: f64, p: DVec3) -> bool {
 /// appended to `tiles/<tile>.pts` in the run's workspace. A frame's metadata is its point count
 /// and bounding box, so readers skip frames outside a region without decompressing them.
 #[derive(Clone, Copy)]
-pub struct Store<'a> {
+pub(crate) struct Store<'a> {
     ws: &'a Workspace,
 }
 
@@ -141,11 +136,11 @@ const KIND: [u8; 4] = *b"TPTS";
 /// Bytes of a frame's metadata: point count and bounding box.
 const META: usize = 4 + 48;
 /// The store's directory in the workspace.
-pub const DIR: &str = "tiles";
+pub(crate) const DIR: &str = "tiles";
 
 impl<'a> Store<'a> {
     /// The store of workspace `ws` (its directory created if needed).
-    pub fn new(ws: &'a Workspace) -> Result<Store<'a>> {
+    pub(crate) fn new(ws: &'a Workspace) -> Result<Store<'a>> {
         ws.create_dir(DIR)?;
         Ok(Store { ws })
     }
@@ -155,23 +150,18 @@ impl<'a> Store<'a> {
     }
 
     /// The path of tile `t`'s file (for messages).
-    pub fn path(&self, t: u32) -> std::path::PathBuf {
+    pub(crate) fn path(&self, t: u32) -> std::path::PathBuf {
         self.ws.path(&Self::name(t))
     }
 
     /// Removes every tile's points.
-    pub fn clear(&self) -> Result<()> {
+    pub(crate) fn clear(&self) -> Result<()> {
         self.ws.remove(DIR);
         self.ws.create_dir(DIR)
     }
 
-    /// Appends points to tile `t`'s file as one frame.
-    pub fn append(&self, t: u32, pts: &TilePoints) -> Result<()> {
-        self.append_runs(t, pts, &[pts.xyz.len()])
-    }
-
     /// Appends `pts` to tile `t`'s file as several frames, of the lengths in `runs`.
-    pub fn append_runs(&self, t: u32, pts: &TilePoints, runs: &[usize]) -> Result<()> {
+    pub(crate) fn append_runs(&self, t: u32, pts: &TilePoints, runs: &[usize]) -> Result<()> {
         let name = Self::name(t);
         let path = self.ws.path(&name);
         let mut zc = zstd::bulk::Compressor::new(1).map_err(io(&path))?;
@@ -185,20 +175,20 @@ impl<'a> Store<'a> {
     }
 
     /// Makes every tile file durable.
-    pub fn sync(&self) -> Result<()> {
+    pub(crate) fn sync(&self) -> Result<()> {
         self.ws.sync_dir(DIR)
     }
 
     /// Streams tile `t`'s points in chunks, keeping those `keep` accepts; returns how many
     /// points the tile's file holds (kept or not).
-    pub fn read(&self, t: u32, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<u64> {
+    pub(crate) fn read(&self, t: u32, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<u64> {
         self.read_near(t, None, out, keep)
     }
 
     /// As [`Store::read`], but only chunks whose bounding box comes within the given distance
     /// of the given box are decompressed (a tile's halo needs only its neighbours' borders);
     /// returns how many points the chunks read hold.
-    pub fn read_near(&self, t: u32, near: Option<(&Bounds, f64)>, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<u64> {
+    pub(crate) fn read_near(&self, t: u32, near: Option<(&Bounds, f64)>, out: &mut TilePoints, keep: impl Fn(DVec3, u64) -> bool) -> Result<u64> {
         let name = Self::name(t);
         let path = self.ws.path(&name);
         let Some(mut f) = self.ws.open(&name)? else { return Ok(0) };
@@ -274,7 +264,7 @@ fn encode_chunk(zc: &mut zstd::bulk::Compressor, xyz: &[DVec3], gid: &[u64]) -> 
 const SUB_CELLS: f64 = 16.0;
 
 /// Buffers points per tile and appends them to the store when the buffers grow past a budget.
-pub struct Bucketer<'a> {
+pub(crate) struct Bucketer<'a> {
     grid: &'a Grid,
     store: Store<'a>,
     /// One buffer per tile (a vector, not a map: it is looked up for every point read).
@@ -287,12 +277,12 @@ pub struct Bucketer<'a> {
 
 impl<'a> Bucketer<'a> {
     /// A bucketer holding at most `budget` points in memory.
-    pub fn new(grid: &'a Grid, store: Store<'a>, budget: usize) -> Self {
+    pub(crate) fn new(grid: &'a Grid, store: Store<'a>, budget: usize) -> Self {
         Bucketer { grid, store, buffers: vec![TilePoints::default(); grid.len()], buffered: 0, budget: budget.max(1024), counts: vec![0; grid.len()] }
     }
 
     /// Adds a chunk of points; `gid0` is the global id of the chunk's first point.
-    pub fn add(&mut self, chunk: &PointChunk, gids: &[u64]) -> Result<()> {
+    pub(crate) fn add(&mut self, chunk: &PointChunk, gids: &[u64]) -> Result<()> {
         for (p, &g) in chunk.xyz.iter().zip(gids) {
             let t = self.grid.tile_of(*p);
             let b = &mut self.buffers[t as usize];
@@ -308,7 +298,7 @@ impl<'a> Bucketer<'a> {
     }
 
     /// Writes every buffer out.
-    pub fn flush(&mut self) -> Result<()> {
+    pub(crate) fn flush(&mut self) -> Result<()> {
         use rayon::prelude::*;
         let tiles: Vec<(u32, TilePoints)> =
             self.buffers.iter_mut().enumerate().filter(|(_, b)| !b.xyz.is_empty()).map(|(t, b)| (t as u32, std::mem::take(b))).collect();

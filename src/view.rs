@@ -10,14 +10,14 @@ use glam::DVec3;
 use std::path::Path;
 
 /// Points a view embeds at most: about 3 MB of base64.
-pub const VIEW_POINTS: f64 = 250_000.0;
+pub(crate) const VIEW_POINTS: f64 = 250_000.0;
 
 fn b64(bytes: &[u8]) -> String {
     base64::engine::general_purpose::STANDARD.encode(bytes)
 }
 
 /// Writes `view.html` at `path`: `points` (a sample) and `curves`, in world coordinates.
-pub fn write_html(path: &Path, title: &str, points: &[DVec3], curves: &[Polyline], crs: &Crs) -> Result<()> {
+pub(crate) fn write_html(path: &Path, title: &str, points: &[DVec3], curves: &[Polyline], crs: &Crs) -> Result<()> {
     let mut b = crate::points::Bounds::EMPTY;
     points.iter().chain(curves.iter().flat_map(|c| c.vertices.iter().map(|v| &v.p))).for_each(|&p| b.grow(p));
     let (lo, hi) = if b.is_empty() { (DVec3::ZERO, DVec3::ONE) } else { (DVec3::from(b.min), DVec3::from(b.max)) };

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 /// A run directory on disk, or its stand-in in memory.
-pub struct Workspace {
+pub(crate) struct Workspace {
     root: PathBuf,
     /// The files, when in memory.
     memory: Option<Mutex<HashMap<String, Arc<Vec<u8>>>>>,
@@ -29,7 +29,7 @@ pub struct Workspace {
 }
 
 /// The lock file of a run directory.
-pub const LOCK: &str = "lock";
+pub(crate) const LOCK: &str = "lock";
 
 impl Drop for Workspace {
     fn drop(&mut self) {
@@ -56,14 +56,14 @@ fn same_file(f: &std::fs::File, path: &Path) -> bool {
 
 impl Workspace {
     /// The run directory `dir` (created if needed).
-    pub fn disk(dir: &Path) -> Result<Workspace> {
+    pub(crate) fn disk(dir: &Path) -> Result<Workspace> {
         let created = !dir.exists();
         std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
         Ok(Workspace { root: dir.to_path_buf(), memory: None, lock: None, worker_lock: None, work: None, created })
     }
 
     /// A workspace that keeps its files in memory.
-    pub fn memory() -> Workspace {
+    pub(crate) fn memory() -> Workspace {
         Workspace { root: PathBuf::from("<memory>"), memory: Some(Mutex::new(HashMap::new())), lock: None, worker_lock: None, work: None, created: false }
     }
 
@@ -74,7 +74,7 @@ impl Workspace {
     /// Worker `i` of a run shared by several (`Some(i)`) shares the lock file with the other
     /// workers and takes `lock.<i>` alone: workers run side by side, each index once, and a
     /// lone run neither joins them nor lets them in.
-    pub fn lock(&mut self, worker: Option<u32>) -> Result<()> {
+    pub(crate) fn lock(&mut self, worker: Option<u32>) -> Result<()> {
         if self.memory.is_some() || self.lock.is_some() {
             return Ok(());
         }
@@ -156,14 +156,14 @@ impl Workspace {
     }
 
     /// The root directory.
-    pub fn root(&self) -> &Path {
+    pub(crate) fn root(&self) -> &Path {
         &self.root
     }
 
     /// Puts the files and directories named `names` (top-level names, such as `tiles`) in
     /// `dir` instead of the run directory from now on (created if needed), or back in the run
     /// directory for None. In memory, nothing changes.
-    pub fn set_work_dir(&mut self, dir: Option<&Path>, names: &'static [&'static str]) -> Result<()> {
+    pub(crate) fn set_work_dir(&mut self, dir: Option<&Path>, names: &'static [&'static str]) -> Result<()> {
         if self.memory.is_some() {
             return Ok(());
         }
@@ -175,7 +175,7 @@ impl Workspace {
     }
 
     /// The path of `name` (for messages, and for files only disk runs write).
-    pub fn path(&self, name: &str) -> PathBuf {
+    pub(crate) fn path(&self, name: &str) -> PathBuf {
         match &self.work {
             Some((dir, names)) if names.contains(&name.split('/').next().unwrap_or(name)) => dir.join(name),
             _ => self.root.join(name),
@@ -187,7 +187,7 @@ impl Workspace {
     }
 
     /// Creates the directory `name`.
-    pub fn create_dir(&self, name: &str) -> Result<()> {
+    pub(crate) fn create_dir(&self, name: &str) -> Result<()> {
         if self.memory.is_some() {
             return Ok(());
         }
@@ -196,7 +196,7 @@ impl Workspace {
     }
 
     /// Removes the file or directory `name`, if there is one.
-    pub fn remove(&self, name: &str) {
+    pub(crate) fn remove(&self, name: &str) {
         if let Some(mut files) = self.files() {
             let dir = format!("{name}/");
             files.retain(|k, _| k != name && !k.starts_with(&dir));
@@ -207,7 +207,7 @@ impl Workspace {
     }
 
     /// True if the file `name` exists.
-    pub fn exists(&self, name: &str) -> bool {
+    pub(crate) fn exists(&self, name: &str) -> bool {
         match self.files() {
             Some(files) => files.contains_key(name),
             None => self.path(name).exists(),
@@ -215,7 +215,7 @@ impl Workspace {
     }
 
     /// The bytes of file `name`, or None if there is no such file.
-    pub fn read(&self, name: &str) -> Result<Option<Vec<u8>>> {
+    pub(crate) fn read(&self, name: &str) -> Result<Option<Vec<u8>>> {
         if let Some(files) = self.files() {
             return Ok(files.get(name).map(|b| b.to_vec()));
         }
@@ -228,7 +228,7 @@ impl Workspace {
     }
 
     /// Writes file `name` atomically: temporary file, fsync, rename, fsync of the directory.
-    pub fn write_atomic(&self, name: &str, bytes: &[u8]) -> Result<()> {
+    pub(crate) fn write_atomic(&self, name: &str, bytes: &[u8]) -> Result<()> {
         match self.files() {
             Some(mut files) => {
                 files.insert(name.to_string(), Arc::new(bytes.to_vec()));
@@ -239,7 +239,7 @@ impl Workspace {
     }
 
     /// Appends `bytes` to file `name` (created if need be).
-    pub fn append(&self, name: &str, bytes: &[u8]) -> Result<()> {
+    pub(crate) fn append(&self, name: &str, bytes: &[u8]) -> Result<()> {
         if let Some(mut files) = self.files() {
             Arc::make_mut(files.entry(name.to_string()).or_default()).extend_from_slice(bytes);
             return Ok(());
@@ -251,7 +251,7 @@ impl Workspace {
     }
 
     /// Makes every file of directory `name` durable.
-    pub fn sync_dir(&self, name: &str) -> Result<()> {
+    pub(crate) fn sync_dir(&self, name: &str) -> Result<()> {
         if self.memory.is_some() {
             return Ok(());
         }
@@ -263,7 +263,7 @@ impl Workspace {
     }
 
     /// A stream over file `name`, or None if there is no such file.
-    pub fn open(&self, name: &str) -> Result<Option<Source>> {
+    pub(crate) fn open(&self, name: &str) -> Result<Option<Source>> {
         if let Some(files) = self.files() {
             return Ok(files.get(name).map(|b| Source::Memory(b.clone(), 0)));
         }
@@ -277,7 +277,7 @@ impl Workspace {
 }
 
 /// A file being read front to back, with skips.
-pub enum Source {
+pub(crate) enum Source {
     /// A file on disk.
     File(BufReader<std::fs::File>),
     /// A file in memory and the read position.
@@ -286,7 +286,7 @@ pub enum Source {
 
 impl Source {
     /// Fills `buf`; false at the end of the file (nothing read).
-    pub fn read_exact_or_end(&mut self, buf: &mut [u8]) -> std::io::Result<bool> {
+    pub(crate) fn read_exact_or_end(&mut self, buf: &mut [u8]) -> std::io::Result<bool> {
         match self {
             Source::File(f) => {
                 // (The end of the file only before the first byte: a part of `buf` is a
@@ -316,7 +316,7 @@ impl Source {
     }
 
     /// Fills `buf`, which must be there.
-    pub fn read_exact(&mut self, buf: &mut [u8]) -> std::io::Result<()> {
+    pub(crate) fn read_exact(&mut self, buf: &mut [u8]) -> std::io::Result<()> {
         if self.read_exact_or_end(buf)? || buf.is_empty() {
             Ok(())
         } else {
@@ -325,7 +325,7 @@ impl Source {
     }
 
     /// Skips `n` bytes.
-    pub fn skip(&mut self, n: usize) -> std::io::Result<()> {
+    pub(crate) fn skip(&mut self, n: usize) -> std::io::Result<()> {
         match self {
             Source::File(f) => f.seek_relative(n as i64),
             Source::Memory(b, at) => {
@@ -337,7 +337,7 @@ impl Source {
 }
 
 /// Writes `bytes` to `path` atomically: temporary file, fsync, rename, fsync of the directory.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     use std::io::Write;
     let tmp = path.with_extension("tmp");
     let r = (|| {

@@ -34,7 +34,7 @@ const CIRCLES: &str = "crease_circles";
 const CURVES: &str = "crease_curves";
 const CORNERS: &str = "crease_corners";
 /// The registered application name of the curves' extended data.
-pub const APP: &str = "CREASE";
+pub(super) const APP: &str = "CREASE";
 
 /// A curve's attributes as extended data: name, value, name, value, ...
 fn attributes(c: &Polyline) -> XData {
@@ -116,7 +116,7 @@ fn entity(c: &Polyline, p: &Piece, d: &mut Drawing) -> Option<(EntityType, &'sta
 }
 
 /// Writes `curves` to `path` as DXF (AutoCAD 2000 format, which CAD tools and GDAL read), each
-/// as its typed pieces within `tol` (see [`typed::tolerance`]).
+/// as its typed pieces within `tol` (see `typed::tolerance`).
 pub fn write_dxf(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
     let mut d = Drawing::new();
     d.header.version = dxf::enums::AcadVersion::R2000;

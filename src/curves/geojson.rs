@@ -18,7 +18,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 /// Writes `curves` to `path` as a GeoJSON FeatureCollection (`tol`: the tolerance of the typed
-/// pieces that name each curve's kind, see [`typed::tolerance`]).
+/// pieces that name each curve's kind, see `typed::tolerance`).
 pub fn write_geojson(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);

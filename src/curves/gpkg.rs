@@ -49,7 +49,7 @@ fn geometry(c: &Polyline, srs: i64) -> Vec<u8> {
 }
 
 /// Writes `curves` to `path` as a GeoPackage (replacing any file there; `tol`: the tolerance of
-/// the typed pieces that name each curve's kind, see [`typed::tolerance`]).
+/// the typed pieces that name each curve's kind, see `typed::tolerance`).
 pub fn write_gpkg(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
     let _ = std::fs::remove_file(path);
     let out = |e: rusqlite::Error| Error::output(path, std::io::Error::other(e.to_string()));

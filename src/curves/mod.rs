@@ -15,7 +15,7 @@
 //!   `free` or `closed`), `corners` (indices of corner vertices, as text). The CRS is named with
 //!   the `crs` member, which GDAL reads: the EPSG URN, or the WKT when the CRS has no code; the
 //!   full WKT is also in `crs_wkt`, the units in `crs_units`. Without a CRS, GDAL assumes WGS 84.
-//!   Also `kind`, what the curve is as typed pieces ([`typed`]): `line`, `arc`, `circle` or
+//!   Also `kind`, what the curve is as typed pieces (`typed`): `line`, `arc`, `circle` or
 //!   `polyline` where all its pieces are of that kind, `mixed` where they differ; and `radius`,
 //!   where it is one arc or one circle (else null).
 //! - `curves.gpkg`: an OGC GeoPackage, a `curves` table of LineString Z features with the same
@@ -29,7 +29,7 @@
 //!   `start`, `end`, `corners` 1000), then the piece's `kind` (1000) and an arc's or a circle's
 //!   `radius` (1040); GDAL lists them as `RawCodeValues` with `--config
 //!   DXF_INCLUDE_RAW_CODE_VALUES TRUE`. No CRS (DXF has none).
-//! - `curves.json`: the typed pieces, one record each ([`typed::write_pieces`]).
+//! - `curves.json`: the typed pieces, one record each (`typed::write_pieces`).
 //!
 //! A curve's `angle` is the mean dihedral angle of its crease in degrees: the wedge the two
 //! surfaces enclose, 90 at a cube's edge, 135 where a chamfer meets a face, towards 180 as the
@@ -53,7 +53,7 @@ mod gpkg;
 mod obj;
 mod ply;
 mod shape;
-pub mod typed;
+pub(crate) mod typed;
 
 pub use self::dxf::write_dxf;
 pub use geojson::write_geojson;
@@ -66,7 +66,8 @@ use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// The curve file formats a run can write.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Format {
     /// Wavefront OBJ polylines (`curves.obj`).
@@ -85,9 +86,9 @@ pub enum Format {
 
 impl Format {
     /// Every format, in the order written.
-    pub const ALL: [Format; 6] = [Format::Obj, Format::Ply, Format::Geojson, Format::Gpkg, Format::Dxf, Format::Json];
+    pub(crate) const ALL: [Format; 6] = [Format::Obj, Format::Ply, Format::Geojson, Format::Gpkg, Format::Dxf, Format::Json];
     /// What a run writes unless told otherwise.
-    pub const DEFAULT: [Format; 3] = [Format::Obj, Format::Ply, Format::Geojson];
+    pub(crate) const DEFAULT: [Format; 3] = [Format::Obj, Format::Ply, Format::Geojson];
 
     /// The output's file name.
     pub fn file_name(self) -> &'static str {
@@ -102,7 +103,7 @@ impl Format {
     }
 
     /// Writes `curves` in this format (`tolerance`: that of the typed pieces, see
-    /// [`typed::tolerance`]).
+    /// `typed::tolerance`).
     pub fn write(self, path: &std::path::Path, curves: &(impl Curves + ?Sized), crs: &crate::crs::Crs, tolerance: f64) -> crate::Result<()> {
         match self {
             Format::Obj => write_obj(path, curves, crs),
@@ -221,7 +222,7 @@ impl Polyline {
 
     /// How the curve ends at its first and last vertex: "corner" (three or more surfaces
     /// meet), "free" (it fades out or meets a border of the cloud), or "closed" for a loop.
-    pub fn end_kinds(&self) -> [&'static str; 2] {
+    pub(crate) fn end_kinds(&self) -> [&'static str; 2] {
         if self.closed {
             return ["closed"; 2];
         }
@@ -231,7 +232,7 @@ impl Polyline {
 
     /// Indices of the corner vertices, as text ("0,17"): a list field that every GIS format
     /// carries.
-    pub fn corner_list(&self) -> String {
+    pub(crate) fn corner_list(&self) -> String {
         self.vertices.iter().enumerate().filter(|(_, v)| v.corner).map(|(i, _)| i.to_string()).collect::<Vec<_>>().join(",")
     }
 }

@@ -48,7 +48,7 @@ impl Shape {
     }
 
     /// The shape of a stored code (unknown for any other).
-    pub fn of_code(code: u8) -> Shape {
+    pub(crate) fn of_code(code: u8) -> Shape {
         match code {
             1 => Shape::Convex,
             2 => Shape::Concave,
@@ -126,7 +126,7 @@ impl Outside {
     }
 
     /// Labels every curve of `curves` with its [`Outside::shape`].
-    pub fn label(&self, curves: &mut [Polyline]) {
+    pub(crate) fn label(&self, curves: &mut [Polyline]) {
         use rayon::prelude::*;
         curves.par_iter_mut().for_each(|c| c.shape = self.shape(c));
     }

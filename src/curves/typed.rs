@@ -3,21 +3,6 @@
 //! tolerance over its whole span. What no such fit holds for more than one step stays a
 //! polyline run. A piece starts and ends on vertices of its curve, so pieces that meet share
 //! their end points exactly, corners included.
-//!
-//! ```
-//! use crease::curves::{typed, Polyline};
-//! use glam::DVec3;
-//! // Two straight runs meeting at a corner, sampled every 0.1.
-//! let mut pl = Polyline::from_points(7, (0..=20).map(|k| {
-//!     let t = k as f64 / 10.0;
-//!     if t <= 1.0 { DVec3::new(t, 0.0, 0.0) } else { DVec3::new(1.0, t - 1.0, 0.0) }
-//! }));
-//! pl.vertices[10].corner = true;
-//! let pieces = typed::pieces(&pl, 1e-6);
-//! assert_eq!(pieces.len(), 2);
-//! assert!(pieces.iter().all(|p| p.kind == typed::Kind::Line));
-//! assert_eq!(pieces[0].end, pieces[1].start);
-//! ```
 
 use super::{Curves, Polyline, Shape};
 use crate::crs::Crs;
@@ -31,7 +16,7 @@ use std::path::Path;
 /// What a piece is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Kind {
+pub(crate) enum Kind {
     /// A straight segment from `start` to `end`.
     Line,
     /// A circular arc from `start` to `end`, counterclockwise about `axis`.
@@ -44,7 +29,7 @@ pub enum Kind {
 
 impl Kind {
     /// Its name in the outputs: `line`, `arc`, `circle` or `polyline`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Kind::Line => "line",
             Kind::Arc => "arc",
@@ -57,7 +42,7 @@ impl Kind {
 /// What a whole curve is, from its pieces (see [`pieces`]): the name of the kind they all
 /// share (`polyline` for a curve without pieces), `mixed` where they differ; and the radius
 /// where the curve is one arc or one circle.
-pub fn curve_kind(pieces: &[Piece]) -> (&'static str, Option<f64>) {
+pub(crate) fn curve_kind(pieces: &[Piece]) -> (&'static str, Option<f64>) {
     let Some(first) = pieces.first() else { return (Kind::Polyline.name(), None) };
     if pieces.iter().any(|p| p.kind != first.kind) {
         return ("mixed", None);
@@ -68,7 +53,7 @@ pub fn curve_kind(pieces: &[Piece]) -> (&'static str, Option<f64>) {
 
 /// One piece of a typed curve.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Piece {
+pub(crate) struct Piece {
     /// Id of the curve the piece belongs to.
     pub curve: u32,
     /// Its type.
@@ -186,7 +171,7 @@ fn circle_fit(v: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64)> {
 }
 
 /// The pieces of curve `pl`, each within `tol` of every vertex it spans.
-pub fn pieces(pl: &Polyline, tol: f64) -> Vec<Piece> {
+pub(crate) fn pieces(pl: &Polyline, tol: f64) -> Vec<Piece> {
     let v: Vec<DVec3> = pl.vertices.iter().map(|x| x.p).collect();
     let n = v.len();
     if n < 2 {
@@ -342,14 +327,14 @@ fn farthest(lo: usize, hi: usize, ok: impl Fn(usize) -> bool) -> usize {
 /// at 2 spacings of noise, 99 % of them within two), and the largest stray of the hundred or so
 /// vertices of an edge is about three (sqrt(2 ln 100) = 3.03 for normal strays): a tighter
 /// piece breaks where one vertex strays.
-pub fn tolerance(kappa: f64, noise: f64) -> f64 {
+pub(crate) fn tolerance(kappa: f64, noise: f64) -> f64 {
     (3.0 * noise).max(0.5 * kappa)
 }
 
 /// Writes `curves.json`: the pieces of every curve within `tol` (see [`pieces`]), one JSON
 /// record a piece with its curve's confidence and shape and the two surface normals at its
 /// ends.
-pub fn write_pieces(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
+pub(crate) fn write_pieces(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);
     let out = |e| Error::output(path, e);
@@ -532,5 +517,28 @@ mod tests {
         assert_eq!(pieces.len(), 1, "{pieces:?}");
         assert_eq!(pieces[0].kind, Kind::Polyline);
         check(&pl, &pieces, 0.01);
+    }
+
+    #[test]
+    fn two_runs_meeting_at_a_corner_are_two_lines() {
+        use crate::curves::{typed, Polyline};
+        use glam::DVec3;
+        // Two straight runs meeting at a corner, sampled every 0.1.
+        let mut pl = Polyline::from_points(
+            7,
+            (0..=20).map(|k| {
+                let t = k as f64 / 10.0;
+                if t <= 1.0 {
+                    DVec3::new(t, 0.0, 0.0)
+                } else {
+                    DVec3::new(1.0, t - 1.0, 0.0)
+                }
+            }),
+        );
+        pl.vertices[10].corner = true;
+        let pieces = typed::pieces(&pl, 1e-6);
+        assert_eq!(pieces.len(), 2);
+        assert!(pieces.iter().all(|p| p.kind == typed::Kind::Line));
+        assert_eq!(pieces[0].end, pieces[1].start);
     }
 }

@@ -16,7 +16,7 @@ use glam::DVec3;
 /// What sorting and smoothing a block's edge points takes: the blocks, their origin, the
 /// grouped corners (which cap the smoothing's neighbourhoods), and how far the growing halo
 /// and the smoothing's context reach past a block.
-pub struct BlockContext<'a> {
+pub(crate) struct BlockContext<'a> {
     blocks: &'a Blocks,
     origin: DVec3,
     corners: Corners<'a>,
@@ -30,7 +30,7 @@ pub struct BlockContext<'a> {
 
 /// A block's edge points, sorted (see [`sort_edges`]), each set in the order of its positions.
 #[derive(Default)]
-pub struct BlockEdges {
+pub(crate) struct BlockEdges {
     /// The points the block owns.
     pub own: SmoothedEdges,
     /// The points of its growing halo.
@@ -42,7 +42,7 @@ pub struct BlockEdges {
 impl<'a> BlockContext<'a> {
     /// The context of the blocks `blocks` about `origin`, with the grouped corners `grouped`
     /// (relative to the origin).
-    pub fn new(blocks: &'a Blocks, origin: DVec3, grouped: &'a [DVec3], r: &'a Resolved) -> BlockContext<'a> {
+    pub(crate) fn new(blocks: &'a Blocks, origin: DVec3, grouped: &'a [DVec3], r: &'a Resolved) -> BlockContext<'a> {
         let q = snap_quantum(r.kappa);
         let (halo, reach) = polylines::block_context(r);
         // (The margin covers the f32 rounding of the k-d tree's distances.)
@@ -51,7 +51,7 @@ impl<'a> BlockContext<'a> {
     }
 
     /// The box (relative to the origin) whose edge points block `b` needs.
-    pub fn region(&self, b: u32) -> (DVec3, DVec3) {
+    pub(crate) fn region(&self, b: u32) -> (DVec3, DVec3) {
         self.blocks.list[b as usize].around(self.reach)
     }
 }
@@ -59,7 +59,7 @@ impl<'a> BlockContext<'a> {
 /// Sorts `edges` (world positions; those outside block `b`'s region are passed over) into the
 /// block's own, those of its halo and the context of both, each put in the order of its
 /// positions, whatever the tiles the points came from.
-pub fn sort_edges<'e>(cx: &BlockContext, b: u32, edges: impl IntoIterator<Item = &'e WorldEdge>) -> BlockEdges {
+pub(crate) fn sort_edges<'e>(cx: &BlockContext, b: u32, edges: impl IntoIterator<Item = &'e WorldEdge>) -> BlockEdges {
     let region = cx.region(b);
     let grow_box = cx.blocks.list[b as usize].around(cx.halo);
     let mut sorted = BlockEdges::default();
@@ -85,7 +85,7 @@ pub fn sort_edges<'e>(cx: &BlockContext, b: u32, edges: impl IntoIterator<Item =
 /// context) and confirmed, then split into the block's core (its own points that were
 /// confirmed, with the count of those that were not) and its halo (the halo's confirmed
 /// points), each in the order of its positions.
-pub fn smooth_core(cx: &BlockContext, b: u32, edges: BlockEdges) -> (SmoothedEdges, SmoothedEdges) {
+pub(crate) fn smooth_core(cx: &BlockContext, b: u32, edges: BlockEdges) -> (SmoothedEdges, SmoothedEdges) {
     let BlockEdges { own, around, context } = edges;
     let (n_own, n_around) = (own.points.len(), around.points.len());
     let points: Vec<DVec3> = own.points.iter().chain(&around.points).chain(&context.points).copied().collect();

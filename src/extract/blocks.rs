@@ -15,17 +15,17 @@ use std::collections::{BTreeMap, HashMap};
 /// blocks; on large scans big enough that few polylines cross a border.)
 pub const BASE_STEPS: f64 = 128.0;
 /// A block holding more edge points than this is split in eight...
-pub const MAX_EDGE_POINTS: u64 = 250_000;
+pub(crate) const MAX_EDGE_POINTS: u64 = 250_000;
 /// ...at most this many times (the smallest block is 16 steps across, twice the reach of its
 /// halo and context).
-pub const MAX_SPLITS: u32 = 3;
+pub(crate) const MAX_SPLITS: u32 = 3;
 /// How far past a block's core its polylines are grown, in steps, before they are cut: the
 /// growing inside the core depends only on the edge points within a step or two of it.
-pub const HALO_STEPS: f64 = 4.0;
+pub(crate) const HALO_STEPS: f64 = 4.0;
 
 /// A block: the half-open box `[lo, hi)`, relative to the run's origin.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Block {
+pub(crate) struct Block {
     /// Low corner (inside).
     pub lo: DVec3,
     /// High corner (outside).
@@ -36,24 +36,24 @@ pub struct Block {
 
 impl Block {
     /// True if `p` lies in the block's core.
-    pub fn contains(&self, p: DVec3) -> bool {
+    pub(crate) fn contains(&self, p: DVec3) -> bool {
         p.cmpge(self.lo).all() && p.cmplt(self.hi).all()
     }
 
     /// The block's box grown by `m` on every side, closed.
-    pub fn around(&self, m: f64) -> (DVec3, DVec3) {
+    pub(crate) fn around(&self, m: f64) -> (DVec3, DVec3) {
         (self.lo - DVec3::splat(m), self.hi + DVec3::splat(m))
     }
 }
 
 /// True if `p` lies in the closed box `b`.
-pub fn in_box(b: (DVec3, DVec3), p: DVec3) -> bool {
+pub(crate) fn in_box(b: (DVec3, DVec3), p: DVec3) -> bool {
     p.cmpge(b.0).all() && p.cmple(b.1).all()
 }
 
 /// Edge points counted per cell of the finest block size, as the plan needs them.
 #[derive(Clone, Debug, Default)]
-pub struct Census {
+pub(crate) struct Census {
     fine: f64,
     counts: HashMap<[i64; 3], u64>,
 }
@@ -61,22 +61,22 @@ pub struct Census {
 impl Census {
     /// An empty census for base blocks `side` across (by default [`BASE_STEPS`] polyline
     /// steps).
-    pub fn new(side: f64) -> Census {
+    pub(crate) fn new(side: f64) -> Census {
         Census { fine: side / (1u64 << MAX_SPLITS) as f64, counts: HashMap::new() }
     }
 
     /// Side of the census cells (and of the smallest blocks).
-    pub fn cell_side(&self) -> f64 {
+    pub(crate) fn cell_side(&self) -> f64 {
         self.fine
     }
 
     /// Counts an edge point at `p` (relative to the origin).
-    pub fn add(&mut self, p: DVec3) {
+    pub(crate) fn add(&mut self, p: DVec3) {
         *self.counts.entry(cell(p, self.fine)).or_default() += 1;
     }
 
     /// Adds another census's counts.
-    pub fn merge(&mut self, other: Census) {
+    pub(crate) fn merge(&mut self, other: Census) {
         for (c, n) in other.counts {
             *self.counts.entry(c).or_default() += n;
         }
@@ -89,7 +89,7 @@ impl Census {
 /// parts put their creases in a few planes, all at round coordinates; a scan's facades and
 /// curbs put many in one.)
 #[derive(Clone, Debug)]
-pub struct Layers {
+pub(crate) struct Layers {
     cell: f64,
     bins: [Vec<u64>; 3],
 }
@@ -97,13 +97,13 @@ pub struct Layers {
 impl Layers {
     /// Empty layers across census cells of side `cell` (see [`Census::cell_side`]), in bins
     /// of about `step`.
-    pub fn new(cell: f64, step: f64) -> Layers {
+    pub(crate) fn new(cell: f64, step: f64) -> Layers {
         let n = (cell / step).round().clamp(1.0, 1024.0) as usize;
         Layers { cell, bins: [vec![0; n], vec![0; n], vec![0; n]] }
     }
 
     /// Counts an edge point at `p` (relative to a fixed anchor).
-    pub fn add(&mut self, p: DVec3) {
+    pub(crate) fn add(&mut self, p: DVec3) {
         let n = self.bins[0].len();
         for k in 0..3 {
             let b = ((p[k] / self.cell).rem_euclid(1.0) * n as f64) as usize;
@@ -112,7 +112,7 @@ impl Layers {
     }
 
     /// Adds other layers' counts.
-    pub fn merge(&mut self, other: &Layers) {
+    pub(crate) fn merge(&mut self, other: &Layers) {
         for k in 0..3 {
             self.bins[k].iter_mut().zip(&other.bins[k]).for_each(|(a, b)| *a += b);
         }
@@ -121,7 +121,7 @@ impl Layers {
     /// Where the borders go, relative to the anchor, along each axis: the middle of the bin
     /// that has the fewest edge points within a bin of it (the first of equals), less a whole
     /// cell, so that the anchor lies inside the first cell.
-    pub fn borders(&self) -> DVec3 {
+    pub(crate) fn borders(&self) -> DVec3 {
         let n = self.bins[0].len();
         let w = self.cell / n as f64;
         let at = |k: usize| {
@@ -139,7 +139,7 @@ fn cell(p: DVec3, side: f64) -> [i64; 3] {
 
 /// The blocks of a run, in a fixed order, with a lookup by position.
 #[derive(Clone, Debug, Default)]
-pub struct Blocks {
+pub(crate) struct Blocks {
     base: f64,
     fine: f64,
     /// The blocks, in order.
@@ -150,19 +150,7 @@ pub struct Blocks {
 /// Plans the blocks over the edge points counted in `census`: a base block for each base cell
 /// that holds edge points, split in eight while it holds more than [`MAX_EDGE_POINTS`] (at most
 /// [`MAX_SPLITS`] times), in the order of their cells.
-///
-/// ```
-/// use crease::extract::blocks::{plan, Census};
-/// use glam::DVec3;
-///
-/// let mut census = Census::new(128.0);
-/// census.add(DVec3::new(1.0, 2.0, 3.0));
-/// census.add(DVec3::new(200.0, 2.0, 3.0));
-/// let blocks = plan(&census);
-/// assert_eq!(blocks.list.len(), 2);
-/// assert!(blocks.list[0].contains(DVec3::new(1.0, 2.0, 3.0)));
-/// ```
-pub fn plan(census: &Census) -> Blocks {
+pub(crate) fn plan(census: &Census) -> Blocks {
     let mut cells: BTreeMap<[i64; 3], Vec<([i64; 3], u64)>> = BTreeMap::new();
     for (&c, &n) in &census.counts {
         cells.entry(c.map(|x| x.div_euclid(1 << MAX_SPLITS))).or_default().push((c, n));
@@ -197,7 +185,7 @@ fn split(level: u32, c: [i64; 3], fine: &[([i64; 3], u64)], out: &mut Vec<[[i64;
 impl Blocks {
     /// The blocks covering the census cells (of side `fine`) `cells`, each `[low, high)` along
     /// each axis, in that order: the inverse of [`Blocks::cells`].
-    pub fn from_cells(fine: f64, cells: Vec<[[i64; 3]; 2]>) -> Blocks {
+    pub(crate) fn from_cells(fine: f64, cells: Vec<[[i64; 3]; 2]>) -> Blocks {
         let corner = |c: [i64; 3]| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * fine;
         let mut out = Blocks { base: fine * (1u64 << MAX_SPLITS) as f64, fine, ..Default::default() };
         for (k, c) in cells.into_iter().enumerate() {
@@ -209,13 +197,13 @@ impl Blocks {
 
     /// The side of the census cells and the cells each block covers: what
     /// [`Blocks::from_cells`] rebuilds the same blocks from.
-    pub fn cells(&self) -> (f64, Vec<[[i64; 3]; 2]>) {
+    pub(crate) fn cells(&self) -> (f64, Vec<[[i64; 3]; 2]>) {
         (self.fine, self.list.iter().map(|b| b.cells).collect())
     }
 
     /// The block that owns the edge point at `p`: the one whose census cells hold it. (Every
     /// edge point counted in the census has one, whatever the rounding of the blocks' boxes.)
-    pub fn owner(&self, p: DVec3) -> Option<u32> {
+    pub(crate) fn owner(&self, p: DVec3) -> Option<u32> {
         let c = cell(p, self.fine);
         let base = c.map(|x| x.div_euclid(1 << MAX_SPLITS));
         let held = |b: &Block| (0..3).all(|k| b.cells[0][k] <= c[k] && c[k] < b.cells[1][k]);
@@ -223,7 +211,7 @@ impl Blocks {
     }
 
     /// The blocks whose box meets the closed box `[lo, hi]`, in order.
-    pub fn meeting(&self, lo: DVec3, hi: DVec3) -> Vec<u32> {
+    pub(crate) fn meeting(&self, lo: DVec3, hi: DVec3) -> Vec<u32> {
         let (a, b) = (cell(lo, self.base), cell(hi, self.base));
         let mut out = vec![];
         for x in a[0]..=b[0] {
@@ -245,20 +233,7 @@ impl Blocks {
     /// The blocks in slabs, one layer of base cells each, across the axis along which they
     /// spread over the most base cells (the first of equals): the axis, and the slabs in order
     /// along it, each its blocks in order.
-    ///
-    /// ```
-    /// use crease::extract::blocks::{plan, Census};
-    /// use glam::DVec3;
-    ///
-    /// let mut census = Census::new(1.0);
-    /// for (y, z) in [(0.5, 0.5), (0.5, 1.5), (3.5, 0.5)] {
-    ///     census.add(DVec3::new(0.5, y, z));
-    /// }
-    /// let (axis, slabs) = plan(&census).slabs();
-    /// assert_eq!(axis, 1);
-    /// assert_eq!(slabs, vec![vec![0, 1], vec![2]]);
-    /// ```
-    pub fn slabs(&self) -> (usize, Vec<Vec<u32>>) {
+    pub(crate) fn slabs(&self) -> (usize, Vec<Vec<u32>>) {
         let layer = |b: &Block, k: usize| b.cells[0][k].div_euclid(1 << MAX_SPLITS);
         let spread = |k: usize| self.list.iter().map(|b| layer(b, k)).collect::<std::collections::BTreeSet<_>>().len();
         let axis = (0..3).max_by_key(|&k| (spread(k), std::cmp::Reverse(k))).unwrap_or(0);
@@ -271,14 +246,14 @@ impl Blocks {
 
     /// The least that any piece grown in the blocks `slab` (see [`Blocks::slabs`]) may hold
     /// along `axis`: their lowest side less the growth halo `halo` (infinity for no blocks).
-    pub fn reach_below(&self, slab: &[u32], axis: usize, halo: f64) -> f64 {
+    pub(crate) fn reach_below(&self, slab: &[u32], axis: usize, halo: f64) -> f64 {
         slab.iter().map(|&b| self.list[b as usize].lo[axis]).fold(f64::INFINITY, f64::min) - halo
     }
 
     /// The block whose core holds `p`, else the first whose box grown by `m` holds it. (Smoothed
     /// edge points, and polylines through them, may lie a little outside every block's core,
     /// at the edge cloud's fringes.)
-    pub fn find(&self, p: DVec3, m: f64) -> Option<u32> {
+    pub(crate) fn find(&self, p: DVec3, m: f64) -> Option<u32> {
         let near = self.meeting(p - DVec3::splat(m), p + DVec3::splat(m));
         near.iter().copied().find(|&k| self.list[k as usize].contains(p)).or_else(|| near.first().copied())
     }
@@ -286,7 +261,7 @@ impl Blocks {
 
 /// A part of a grown polyline inside one block's core.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Piece {
+pub(crate) struct Piece {
     /// Vertices, all inside the core.
     pub v: Vec<DVec3>,
     /// Where the polyline crossed the core's border at each end, if it did (else the end is
@@ -298,7 +273,7 @@ pub struct Piece {
 
 /// The parts of the polyline through `v` (closed if `closed`) that `block` owns (`owns`: its
 /// core, and near it whatever lies in no block's core, see [`Blocks::find`]).
-pub fn cut(v: &[DVec3], closed: bool, block: &Block, owns: impl Fn(DVec3) -> bool) -> Vec<Piece> {
+pub(crate) fn cut(v: &[DVec3], closed: bool, block: &Block, owns: impl Fn(DVec3) -> bool) -> Vec<Piece> {
     let inside: Vec<bool> = v.iter().map(|&p| owns(p)).collect();
     if inside.iter().all(|&x| x) {
         return vec![Piece { v: v.to_vec(), ends: [None, None], closed }];
@@ -406,5 +381,32 @@ mod tests {
         assert_eq!(blocks.find(DVec3::new(17.0, 10.0, 10.0), 0.0), None);
         assert_eq!(blocks.find(DVec3::new(17.0, 10.0, 10.0), 1.5), Some(0));
         assert_eq!(blocks.meeting(DVec3::splat(10.0), DVec3::splat(65.0)), vec![0, 1]);
+    }
+
+    #[test]
+    fn far_edge_points_make_two_blocks() {
+        use crate::extract::blocks::{plan, Census};
+        use glam::DVec3;
+
+        let mut census = Census::new(128.0);
+        census.add(DVec3::new(1.0, 2.0, 3.0));
+        census.add(DVec3::new(200.0, 2.0, 3.0));
+        let blocks = plan(&census);
+        assert_eq!(blocks.list.len(), 2);
+        assert!(blocks.list[0].contains(DVec3::new(1.0, 2.0, 3.0)));
+    }
+
+    #[test]
+    fn slabs_go_across_the_widest_spread() {
+        use crate::extract::blocks::{plan, Census};
+        use glam::DVec3;
+
+        let mut census = Census::new(1.0);
+        for (y, z) in [(0.5, 0.5), (0.5, 1.5), (3.5, 0.5)] {
+            census.add(DVec3::new(0.5, y, z));
+        }
+        let (axis, slabs) = plan(&census).slabs();
+        assert_eq!(axis, 1);
+        assert_eq!(slabs, vec![vec![0, 1], vec![2]]);
     }
 }

@@ -11,9 +11,9 @@ use super::params::Resolved;
 use glam::DVec3;
 
 /// Most neighbours used by one fit (the nearest ones).
-pub const MAX_FIT_NEIGHBOURS: usize = 160;
+pub(crate) const MAX_FIT_NEIGHBOURS: usize = 160;
 /// Fewest neighbours of a fit: sparse regions widen the neighbourhood to this many.
-pub const MIN_FIT_NEIGHBOURS: usize = 20;
+pub(crate) const MIN_FIT_NEIGHBOURS: usize = 20;
 
 /// Under noise, a gentle crease is also a candidate when two planes explain its
 /// neighbourhood better than the quadric by this ratio of weighted residual sums of squares
@@ -23,14 +23,14 @@ pub const MIN_FIT_NEIGHBOURS: usize = 20;
 /// Quality table with the consensus filter, two seeds: fandisk 0.01 dB recall 0.91 / 0.94 ->
 /// 0.95 / 0.96; 0.85 found more than 0.8, and 0.9 or more gave the projection many points on
 /// curved surfaces to misjudge (joint's bore: precision 0.95 -> 0.90 without the filter).
-pub const CREASE_RATIO: f64 = 0.85;
+pub(crate) const CREASE_RATIO: f64 = 0.85;
 /// Smallest angle between the two planes of the crease test, degrees (as the projection's
 /// two-plane test).
-pub const CREASE_MIN_DEG: f64 = 20.0;
+pub(crate) const CREASE_MIN_DEG: f64 = 20.0;
 
 /// A point's fit residual, and whether it passed the crease test (see `crease_across`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Residual {
+pub(crate) struct Residual {
     /// Largest distance of a neighbour from the fitted quadric.
     pub value: f32,
     /// True if two planes explain the neighbourhood clearly better than the quadric.
@@ -40,14 +40,14 @@ pub struct Residual {
 impl Residual {
     /// Whether the point is a candidate at threshold `tau`: its residual exceeds tau, or it
     /// passed the crease test.
-    pub fn is_candidate(&self, tau: f64) -> bool {
+    pub(crate) fn is_candidate(&self, tau: f64) -> bool {
         self.crease || self.value as f64 > tau
     }
 }
 
 /// The residuals of a tile's core points, by global id, in the order of the tile's cloud.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct TileResiduals {
+pub(crate) struct TileResiduals {
     /// Global ids.
     pub gid: Vec<u64>,
     /// Their residuals.
@@ -57,7 +57,7 @@ pub struct TileResiduals {
 /// Stage 1 for one tile: the residual of every core point of `cloud` (`is_core` flags the
 /// points in the order the tile was loaded: the core points to evaluate, all of them unless
 /// [`Resolved::evaluate`] is below 1), with the parameters `r`.
-pub fn tile_residuals(cloud: &Cloud, is_core: &[bool], r: &Resolved) -> TileResiduals {
+pub(crate) fn tile_residuals(cloud: &Cloud, is_core: &[bool], r: &Resolved) -> TileResiduals {
     let which = cloud.core_points(is_core);
     let residual = residuals(cloud, &which, r.fit_radius, r.halo(), r.noise_limited());
     TileResiduals { gid: which.iter().map(|&i| cloud.gid[i as usize]).collect(), residual }
@@ -65,7 +65,7 @@ pub fn tile_residuals(cloud: &Cloud, is_core: &[bool], r: &Resolved) -> TileResi
 
 /// The candidates among a tile's core points (indices into `cloud`, in order), given their
 /// residuals as [`tile_residuals`] gave them and the threshold `tau`.
-pub fn tile_candidates(cloud: &Cloud, is_core: &[bool], res: &TileResiduals, tau: f64) -> Vec<u32> {
+pub(crate) fn tile_candidates(cloud: &Cloud, is_core: &[bool], res: &TileResiduals, tau: f64) -> Vec<u32> {
     use rayon::prelude::*;
     // The core points' residuals, in the cloud's order as the residual pass wrote them (the
     // tile loads the same way in both passes); joined by global id if not.
@@ -96,7 +96,7 @@ pub fn tile_candidates(cloud: &Cloud, is_core: &[bool], res: &TileResiduals, tau
 /// residual records of the tiles around it (`around`, which must include every tile whose core
 /// the halo reaches). A point no record holds counts as a candidate: it is kept out of the
 /// patches of the surfaces-first projection rather than let link two of them.
-pub fn band_of(cloud: &Cloud, around: &[TileResiduals], tau: f64) -> Vec<bool> {
+pub(crate) fn band_of(cloud: &Cloud, around: &[TileResiduals], tau: f64) -> Vec<bool> {
     use rayon::prelude::*;
     let mut by_gid: Vec<(u64, bool)> = around.iter().flat_map(|t| t.gid.iter().copied().zip(t.residual.iter().map(|r| r.is_candidate(tau)))).collect();
     by_gid.par_sort_unstable();
@@ -106,7 +106,7 @@ pub fn band_of(cloud: &Cloud, around: &[TileResiduals], tau: f64) -> Vec<bool> {
 /// The fit residual of every point in `which`, for neighbourhood radius `r`; sparse
 /// neighbourhoods are widened up to `reach` (see [`Neighbourhood::reach`]). With `creases`
 /// (for clouds whose neighbourhoods are sized by the noise), points also take the crease test.
-pub fn residuals(cloud: &Cloud, which: &[u32], r: f64, reach: f64, creases: bool) -> Vec<Residual> {
+pub(crate) fn residuals(cloud: &Cloud, which: &[u32], r: f64, reach: f64, creases: bool) -> Vec<Residual> {
     let nb = Neighbourhood { radius: r, reach, min: MIN_FIT_NEIGHBOURS, max: MAX_FIT_NEIGHBOURS, ordered: false };
     cloud.map_neighbourhoods(which, nb, Vec::new, |pts, i, buf| residual_of(cloud, i as usize, r, buf, pts, creases))
 }
@@ -160,7 +160,7 @@ fn crease_across(pts: &[(DVec3, f64)], x: DVec3, q: &Quadric) -> bool {
 /// floating point, the mean differed between tilings in its last digits, and a candidate on
 /// the threshold could flip.)
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct ResidualSum {
+pub(crate) struct ResidualSum {
     sum: u128,
     count: u64,
 }
@@ -178,7 +178,7 @@ impl ResidualSum {
     const SCALE: f64 = 18_446_744_073_709_551_616.0; // 2^64
 
     /// The sum of `residuals`.
-    pub fn of(residuals: impl IntoIterator<Item = f32>) -> ResidualSum {
+    pub(crate) fn of(residuals: impl IntoIterator<Item = f32>) -> ResidualSum {
         let mut s = ResidualSum::default();
         for x in residuals {
             // (Residuals are distances, far below 2^64 model units.)
@@ -189,12 +189,12 @@ impl ResidualSum {
     }
 
     /// Number of residuals summed.
-    pub fn count(&self) -> u64 {
+    pub(crate) fn count(&self) -> u64 {
         self.count
     }
 
     /// The mean residual (0 for no residuals).
-    pub fn mean(&self) -> f64 {
+    pub(crate) fn mean(&self) -> f64 {
         if self.count == 0 {
             return 0.0;
         }

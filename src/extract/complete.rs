@@ -21,7 +21,7 @@ use glam::DVec3;
 
 /// A curve being completed.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Curve {
+pub(crate) struct Curve {
     /// Vertices.
     pub v: Vec<DVec3>,
     /// Per vertex: is it a corner shared with other curves.
@@ -32,7 +32,7 @@ pub struct Curve {
 
 impl Curve {
     /// An open curve through `v` without corners.
-    pub fn new(v: Vec<DVec3>, closed: bool) -> Curve {
+    pub(crate) fn new(v: Vec<DVec3>, closed: bool) -> Curve {
         let corner = vec![false; v.len()];
         Curve { v, corner, closed }
     }
@@ -89,7 +89,7 @@ impl Curve {
 
 /// Completion parameters.
 #[derive(Clone, Copy, Debug)]
-pub struct CompleteParams {
+pub(crate) struct CompleteParams {
     /// The growing step s_max.
     pub step: f64,
     /// Search distance, in steps.
@@ -108,7 +108,7 @@ pub struct CompleteParams {
 
 /// Completes `curves` using the projection stage's `corners`. Once `cancel` is set, what comes
 /// back is partial (the caller sees the flag and discards it).
-pub fn complete(mut curves: Vec<Curve>, corners: &[DVec3], p: &CompleteParams, cancel: &crate::cancel::Cancel) -> Vec<Curve> {
+pub(crate) fn complete(mut curves: Vec<Curve>, corners: &[DVec3], p: &CompleteParams, cancel: &crate::cancel::Cancel) -> Vec<Curve> {
     curves.retain(|c| c.v.len() >= 2);
     attach_corners(&mut curves, corners, p);
     resolve_free_ends(&mut curves, p, cancel);

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 /// the other (the two normals matched either way round). (30 kept more of a noisy hole's rim,
 /// whose wall normal turns along it, but let more of joint's bore through: over the noisy
 /// rows at seed 1, precision summed 0.11 lower.)
-pub const AGREE_DEG: f64 = 20.0;
+pub(crate) const AGREE_DEG: f64 = 20.0;
 /// An edge point is kept if at least this many of its neighbours within one step agree with
 /// it... (Along fandisk's ridge feet at 0.01 dB, nine of ten edge points have 3 or more; of the
 /// sparse edge points off the truth in joint's bore, half have 2 or fewer and nine of ten 5 or
@@ -27,17 +27,17 @@ pub const AGREE_DEG: f64 = 20.0;
 /// 2, pairs of them that agreed by chance still made curves there: joint 0.01 dB mean distance
 /// 0.0050 dB; with 3 or 4, 0.0022-0.0023, and 4 kept it so with the crease test's extra
 /// candidates.)
-pub const MIN_AGREEING: usize = 4;
+pub(crate) const MIN_AGREEING: usize = 4;
 /// ...and they make at least this share of its neighbours. (Below a half and a third, so that
 /// edge points near a corner, where two or three creases' points mix, are kept.)
-pub const MIN_SHARE: f64 = 0.2;
+pub(crate) const MIN_SHARE: f64 = 0.2;
 
 /// Which of the first `own` edge points (positions `points`, normals `normals`) are confirmed
 /// by their neighbours within `radius`; the rest of `points` are context (the edge points
 /// around a block, at least `radius` beyond it). Whether a point is within the radius is
 /// decided in f64, so the result depends only on the set of points within the radius of each
 /// point, not on their order or on how the cloud was cut into blocks.
-pub fn confirmed(points: &[DVec3], normals: &[[Vec3; 2]], own: usize, radius: f64) -> Vec<bool> {
+pub(crate) fn confirmed(points: &[DVec3], normals: &[[Vec3; 2]], own: usize, radius: f64) -> Vec<bool> {
     assert_eq!(points.len(), normals.len(), "one pair of normals per edge point");
     if points.is_empty() {
         return vec![];

@@ -7,7 +7,7 @@ use nalgebra::{Matrix3, Matrix6, Vector6};
 /// Principal components of a weighted point set: eigenvalues in decreasing order with their
 /// unit eigenvectors.
 #[derive(Clone, Copy, Debug)]
-pub struct Pca {
+pub(crate) struct Pca {
     /// Weighted mean.
     pub mean: DVec3,
     /// Eigenvalues of the covariance, largest first.
@@ -18,7 +18,7 @@ pub struct Pca {
 
 impl Pca {
     /// PCA of `(point, weight)` pairs; None if the total weight is zero.
-    pub fn of(points: impl Iterator<Item = (DVec3, f64)> + Clone) -> Option<Pca> {
+    pub(crate) fn of(points: impl Iterator<Item = (DVec3, f64)> + Clone) -> Option<Pca> {
         let (mut sw, mut sp) = (0.0, DVec3::ZERO);
         for (p, w) in points.clone() {
             sw += w;
@@ -48,7 +48,7 @@ impl Pca {
     /// As [`Pca::of`], in one pass over the points instead of two: the moments are taken
     /// about `centre`, which should lie among the points (for example the query point of a
     /// neighbourhood), so that the covariance loses no more than a few digits to cancellation.
-    pub fn of_near(points: impl Iterator<Item = (DVec3, f64)>, centre: DVec3) -> Option<Pca> {
+    pub(crate) fn of_near(points: impl Iterator<Item = (DVec3, f64)>, centre: DVec3) -> Option<Pca> {
         let (mut sw, mut sd) = (0.0, DVec3::ZERO);
         let mut c = [0.0f64; 6];
         for (p, w) in points {
@@ -84,17 +84,17 @@ impl Pca {
     }
 
     /// Normal of the best-fitting plane (smallest component).
-    pub fn normal(&self) -> DVec3 {
+    pub(crate) fn normal(&self) -> DVec3 {
         self.vectors[2]
     }
 
     /// Direction of the best-fitting line (largest component).
-    pub fn axis(&self) -> DVec3 {
+    pub(crate) fn axis(&self) -> DVec3 {
         self.vectors[0]
     }
 
     /// Linearity l0 / (l0 + l1 + l2), in [1/3, 1].
-    pub fn linearity(&self) -> f64 {
+    pub(crate) fn linearity(&self) -> f64 {
         let s = self.values.iter().sum::<f64>();
         if s > 0.0 {
             self.values[0] / s
@@ -104,7 +104,7 @@ impl Pca {
     }
 
     /// Rotation-invariant line measure (l0 - l1) / (l0 + l1), in [0, 1].
-    pub fn line_measure(&self) -> f64 {
+    pub(crate) fn line_measure(&self) -> f64 {
         let s = self.values[0] + self.values[1];
         if s > 0.0 {
             (self.values[0] - self.values[1]) / s
@@ -122,7 +122,7 @@ impl Pca {
 /// (closed forms do not: see [`Pca::of`]). Written out for 3x3, it took 7 % of the CPU samples of
 /// a run where nalgebra's took 10 %: every point's fit and every seed of the projection takes a
 /// PCA.
-pub fn symmetric_eigen3(c: [f64; 6]) -> ([f64; 3], [DVec3; 3]) {
+pub(crate) fn symmetric_eigen3(c: [f64; 6]) -> ([f64; 3], [DVec3; 3]) {
     let mut a = [[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]];
     // Columns of v are the eigenvectors.
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
@@ -169,7 +169,7 @@ pub fn symmetric_eigen3(c: [f64; 6]) -> ([f64; 3], [DVec3; 3]) {
 
 /// An orthonormal frame: origin, two tangent axes and a normal.
 #[derive(Clone, Copy, Debug)]
-pub struct Frame {
+pub(crate) struct Frame {
     /// Origin.
     pub o: DVec3,
     /// First tangent axis.
@@ -182,14 +182,14 @@ pub struct Frame {
 
 impl Frame {
     /// A frame at `o` with normal `n` (unit).
-    pub fn new(o: DVec3, n: DVec3) -> Frame {
+    pub(crate) fn new(o: DVec3, n: DVec3) -> Frame {
         let u = n.any_orthonormal_vector();
         Frame { o, u, v: n.cross(u), n }
     }
 
     /// Local coordinates of `p`.
     #[inline]
-    pub fn local(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn local(&self, p: DVec3) -> DVec3 {
         let d = p - self.o;
         DVec3::new(d.dot(self.u), d.dot(self.v), d.dot(self.n))
     }
@@ -197,7 +197,7 @@ impl Frame {
 
 /// A height function w = a0 + a1 u + a2 v + a3 u^2 + a4 uv + a5 v^2 over a frame.
 #[derive(Clone, Copy, Debug)]
-pub struct Quadric {
+pub(crate) struct Quadric {
     /// The frame.
     pub frame: Frame,
     /// Coefficients.
@@ -206,25 +206,25 @@ pub struct Quadric {
 
 impl Quadric {
     /// The flat surface of a frame (the plane itself).
-    pub fn plane(frame: Frame) -> Quadric {
+    pub(crate) fn plane(frame: Frame) -> Quadric {
         Quadric { frame, a: [0.0; 6] }
     }
 
     /// True if the surface is its frame's plane.
-    pub fn is_plane(&self) -> bool {
+    pub(crate) fn is_plane(&self) -> bool {
         self.a == [0.0; 6]
     }
 
     /// Height of the surface above (u, v).
     #[inline]
-    pub fn height(&self, u: f64, v: f64) -> f64 {
+    pub(crate) fn height(&self, u: f64, v: f64) -> f64 {
         let a = &self.a;
         a[0] + a[1] * u + a[2] * v + a[3] * u * u + a[4] * u * v + a[5] * v * v
     }
 
     /// Signed distance along the frame normal from the surface to `p` (the implicit function).
     #[inline]
-    pub fn value(&self, p: DVec3) -> f64 {
+    pub(crate) fn value(&self, p: DVec3) -> f64 {
         // (A plane's height is zero: its value is the normal coordinate alone, the same number.)
         if self.is_plane() {
             return (p - self.frame.o).dot(self.frame.n);
@@ -235,7 +235,7 @@ impl Quadric {
 
     /// Gradient of [`Quadric::value`] at `p` (not normalised).
     #[inline]
-    pub fn gradient(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn gradient(&self, p: DVec3) -> DVec3 {
         let l = self.frame.local(p);
         let a = &self.a;
         let gu = a[1] + 2.0 * a[3] * l.x + a[4] * l.y;
@@ -244,13 +244,13 @@ impl Quadric {
     }
 
     /// Unit surface normal at `p`.
-    pub fn normal(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn normal(&self, p: DVec3) -> DVec3 {
         self.gradient(p).normalize_or_zero()
     }
 
     /// The direction of strongest curvature, as an angle from the frame's u axis towards v:
     /// the eigenvector of the height function's Hessian with the larger |eigenvalue|.
-    pub fn strongest_curvature_angle(&self) -> f64 {
+    pub(crate) fn strongest_curvature_angle(&self) -> f64 {
         let a = &self.a;
         let (huu, huv, hvv) = (2.0 * a[3], a[4], 2.0 * a[5]);
         let phi = 0.5 * (2.0 * huv).atan2(huu - hvv);
@@ -266,14 +266,14 @@ impl Quadric {
     /// Weighted least-squares fit of heights over `frame` to `(point, weight)` pairs. The
     /// curvature terms are damped by `ridge` (relative to the data's spread) so that a
     /// one-sided or sparse neighbourhood falls back smoothly towards a plane.
-    pub fn fit(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> Option<Quadric> {
+    pub(crate) fn fit(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> Option<Quadric> {
         Quadric::fit_over_plane(frame, points, ridge).0
     }
 
     /// As [`Quadric::fit`], also returning the weighted sum of squared heights over the
     /// frame's plane (the plane's residual sum of squares, summed in the points' order), which
     /// the same pass over the points gives.
-    pub fn fit_over_plane(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> (Option<Quadric>, f64) {
+    pub(crate) fn fit_over_plane(frame: Frame, points: impl Iterator<Item = (DVec3, f64)>, ridge: f64) -> (Option<Quadric>, f64) {
         // The normal equations' entries are weighted moments of the local coordinates,
         // sum w x^a y^b (a + b <= 4, 15 of them for the 21 entries of the upper triangle),
         // and sum w z x^a y^b (a + b <= 2) on the right: about half the products of
@@ -343,7 +343,7 @@ impl Quadric {
 /// Newton projection of `p` onto the intersection curve of two surfaces: repeatedly moves
 /// by the minimum-norm step that zeroes both linearised functions. Returns None if the
 /// surfaces are (nearly) tangent there or the iteration does not settle.
-pub fn project_to_intersection(p: DVec3, s1: &Quadric, s2: &Quadric, tol: f64) -> Option<DVec3> {
+pub(crate) fn project_to_intersection(p: DVec3, s1: &Quadric, s2: &Quadric, tol: f64) -> Option<DVec3> {
     let mut x = p;
     for _ in 0..12 {
         let (f1, f2) = (s1.value(x), s2.value(x));
@@ -369,7 +369,7 @@ pub fn project_to_intersection(p: DVec3, s1: &Quadric, s2: &Quadric, tol: f64) -
 }
 
 /// The point nearest to `p` on which three surfaces meet (Newton on the 3x3 system).
-pub fn project_to_corner(p: DVec3, s: [&Quadric; 3], tol: f64) -> Option<DVec3> {
+pub(crate) fn project_to_corner(p: DVec3, s: [&Quadric; 3], tol: f64) -> Option<DVec3> {
     let mut x = p;
     for _ in 0..12 {
         let f = DVec3::new(s[0].value(x), s[1].value(x), s[2].value(x));

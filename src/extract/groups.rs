@@ -20,7 +20,7 @@ use glam::DVec3;
 
 /// The groups of `lines` (each its vertices, and true if closed) for completion that looks
 /// `reach` ahead: each group its lines in order, the groups in the order of their first lines.
-pub fn groups(lines: &[(Vec<DVec3>, bool)], reach: f64) -> Vec<Vec<u32>> {
+pub(crate) fn groups(lines: &[(Vec<DVec3>, bool)], reach: f64) -> Vec<Vec<u32>> {
     // (The margin covers the rounding of distances summed along two reaches.)
     let radius = 2.0 * reach * (1.0 + 1e-9);
     let mut ends = HashGrid::new(radius);
@@ -45,14 +45,14 @@ pub fn groups(lines: &[(Vec<DVec3>, bool)], reach: f64) -> Vec<Vec<u32>> {
 
 /// The corners of the projection stage in the order of their x, for handing each block or
 /// batch of groups those near it, without indexing every corner of the cloud at once.
-pub struct Corners<'a> {
+pub(crate) struct Corners<'a> {
     all: &'a [DVec3],
     along_x: Vec<u32>,
 }
 
 impl<'a> Corners<'a> {
     /// Sorts `all` along x.
-    pub fn new(all: &'a [DVec3]) -> Corners<'a> {
+    pub(crate) fn new(all: &'a [DVec3]) -> Corners<'a> {
         let mut along_x: Vec<u32> = (0..all.len() as u32).collect();
         along_x.sort_unstable_by(|&a, &b| all[a as usize].x.total_cmp(&all[b as usize].x).then(a.cmp(&b)));
         Corners { all, along_x }
@@ -69,13 +69,13 @@ impl<'a> Corners<'a> {
     }
 
     /// The corners in the closed box `[lo, hi]`, in their order.
-    pub fn within(&self, lo: DVec3, hi: DVec3) -> Vec<DVec3> {
+    pub(crate) fn within(&self, lo: DVec3, hi: DVec3) -> Vec<DVec3> {
         self.numbers_in(lo, hi).into_iter().map(|k| self.all[k as usize]).collect()
     }
 
     /// The corners within `reach` of the box `[lo, hi]`, indexed for handing out those within
     /// `reach` of ends in the box.
-    pub fn near_box(&self, lo: DVec3, hi: DVec3, reach: f64) -> NearCorners<'a> {
+    pub(crate) fn near_box(&self, lo: DVec3, hi: DVec3, reach: f64) -> NearCorners<'a> {
         // (The margin covers the rounding of the distances.)
         let reach = reach * (1.0 + 1e-9);
         let m = DVec3::splat(reach * (1.0 + 1e-9));
@@ -88,7 +88,7 @@ impl<'a> Corners<'a> {
 }
 
 /// Some of the corners of the projection stage, indexed (see [`Corners::near_box`]).
-pub struct NearCorners<'a> {
+pub(crate) struct NearCorners<'a> {
     all: &'a [DVec3],
     grid: HashGrid<u32>,
     reach: f64,
@@ -96,7 +96,7 @@ pub struct NearCorners<'a> {
 
 impl NearCorners<'_> {
     /// The corners within the reach of any of `ends`, in their order.
-    pub fn near(&self, ends: impl IntoIterator<Item = DVec3>) -> Vec<DVec3> {
+    pub(crate) fn near(&self, ends: impl IntoIterator<Item = DVec3>) -> Vec<DVec3> {
         let mut found = vec![];
         for x in ends {
             self.grid.near(x, self.reach, |k| {

@@ -16,7 +16,7 @@ use rayon::prelude::*;
 
 /// Growing parameters.
 #[derive(Clone, Copy, Debug)]
-pub struct GrowParams {
+pub(crate) struct GrowParams {
     /// Step length s_max.
     pub step: f64,
     /// Largest turn between the step and the growth direction, in degrees.
@@ -25,7 +25,7 @@ pub struct GrowParams {
 
 /// A grown polyline.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Grown {
+pub(crate) struct Grown {
     /// Vertices in order.
     pub vertices: Vec<DVec3>,
     /// True if growth came back round to its start.
@@ -36,7 +36,7 @@ pub struct Grown {
 /// of them (a block's core; the rest is its halo, which polylines grow on through). Stops
 /// early, with the polylines grown so far, once `cancel` is set (the caller sees the flag and
 /// discards them).
-pub fn grow(points: &[DVec3], seeds: usize, index: &Index, p: &GrowParams, cancel: &crate::cancel::Cancel) -> Vec<Grown> {
+pub(crate) fn grow(points: &[DVec3], seeds: usize, index: &Index, p: &GrowParams, cancel: &crate::cancel::Cancel) -> Vec<Grown> {
     let n = points.len();
     if n < 2 {
         return vec![];

@@ -3,21 +3,21 @@
 //!
 //! | stage | module | per tile |
 //! |---|---|---|
-//! | statistics (spacing, noise) | [`statistics`] | [`statistics::tile_statistics`] |
-//! | defaults from them | [`params`] | |
-//! | 1. candidates (MLS residual) | [`candidates`] | [`candidates::tile_residuals`], [`candidates::tile_candidates`] |
-//! | 2. robust projection, corners | [`project`] | [`project::tile_edges`] |
-//! | 3. smoothing, consensus filter | [`smooth`], [`consensus`] | [`block_edges::sort_edges`], [`block_edges::smooth_core`] (per growth block, [`blocks`]) |
-//! | 4. growing | [`grow`] | [`polylines::grow_block`], then [`stitch`] |
-//! | 5. completion | [`complete`] | per group of polylines that can act on each other ([`groups`]) |
+//! | statistics (spacing, noise) | `statistics` | `statistics::tile_statistics` |
+//! | defaults from them | `params` | |
+//! | 1. candidates (MLS residual) | `candidates` | `candidates::tile_residuals`, `candidates::tile_candidates` |
+//! | 2. robust projection, corners | `project` | `project::tile_edges` |
+//! | 3. smoothing, consensus filter | `smooth`, `consensus` | `block_edges::sort_edges`, `block_edges::smooth_core` (per growth block, `blocks`) |
+//! | 4. growing | `grow` | `polylines::grow_block`, then `stitch` |
+//! | 5. completion | `complete` | per group of polylines that can act on each other (`groups`) |
 //!
 //! In a few lines each:
 //! - **Statistics**: the spacing from the 16th neighbour, and the noise as the RMS of a quadric
 //!   fitted about the point's own surface (the densest band of its ball, so that a thin part's
-//!   far face is not taken for noise), over a ball at least [`statistics::NOISE_BALL`]
+//!   far face is not taken for noise), over a ball at least `statistics::NOISE_BALL`
 //!   deviations wide, at about 20 000 points sampled by position. Every default length follows
-//!   from them ([`params`]); noisy clouds are thinned so that a fit holds about
-//!   [`params::TARGET_NEIGHBOURS`] points, each point kept averaged over those dropped near it.
+//!   from them (`params`); noisy clouds are thinned so that a fit holds about
+//!   `params::TARGET_NEIGHBOURS` points, each point kept averaged over those dropped near it.
 //! - **Candidates**: points whose MLS fit leaves a residual above tau (the mean residual), and
 //!   under noise also where two planes fit the neighbourhood clearly better than a quadric.
 //! - **Projection**: a forward search splits a candidate's ball into surfaces; two or more
@@ -30,28 +30,30 @@
 //!   from the straight runs of their curves and joined, and each curve's normals and confidence
 //!   taken from the smoothed edge points.
 //!
-//! [`neighbourhood`] holds a tile's points indexed for neighbour queries, [`fit`] the small
+//! `neighbourhood` holds a tile's points indexed for neighbour queries, `fit` the small
 //! fits every stage uses. The pipeline that runs the stages over tiles is [`crate::run`].
 
-pub mod block_edges;
-pub mod blocks;
-pub mod candidates;
-pub mod complete;
-pub mod consensus;
-pub mod fit;
-pub mod groups;
-pub mod grow;
-pub mod neighbourhood;
-pub mod params;
-pub mod polylines;
-pub mod project;
-pub mod smooth;
-pub mod statistics;
-pub mod stitch;
-pub mod sweep;
+pub(crate) mod block_edges;
+pub(crate) mod blocks;
+pub(crate) mod candidates;
+pub(crate) mod complete;
+pub(crate) mod consensus;
+pub(crate) mod fit;
+pub(crate) mod groups;
+pub(crate) mod grow;
+pub(crate) mod neighbourhood;
+pub(crate) mod params;
+pub(crate) mod polylines;
+pub(crate) mod project;
+pub(crate) mod smooth;
+pub(crate) mod statistics;
+pub(crate) mod stitch;
+pub(crate) mod sweep;
 
-pub use params::{Params, Resolved};
-pub use project::{TileEdges, WorldCorner, WorldEdge};
+pub use blocks::BASE_STEPS;
+pub use params::{Model, Params, Resolved};
+pub use polylines::DEFAULT_MIN_CONFIDENCE;
+pub(crate) use project::{TileEdges, WorldCorner, WorldEdge};
 
 use serde::{Deserialize, Serialize};
 
@@ -73,7 +75,7 @@ pub struct Counts {
     /// Candidates dropped as outliers (one surface).
     pub one_surface: u64,
     /// Candidates dropped as scatter: a surface through them fitted worse than the noise
-    /// allows (see [`project::SURFACE_NOISE`]).
+    /// allows (see `project::SURFACE_NOISE`).
     #[serde(default)]
     pub scattered: u64,
     /// Edge points after projection and culling.
@@ -81,12 +83,12 @@ pub struct Counts {
     /// Corner points before grouping.
     pub corner_points: u64,
     /// Edge points dropped before growing because no neighbour agreed on their two surfaces
-    /// (see [`consensus`]).
+    /// (see `consensus`).
     #[serde(default)]
     pub unconfirmed: u64,
     /// Corners after grouping.
     pub corners: u64,
-    /// Growth blocks of the curve stage (see [`blocks`]).
+    /// Growth blocks of the curve stage (see `blocks`).
     #[serde(default)]
     pub blocks: u64,
     /// Polylines grown.
@@ -97,11 +99,11 @@ pub struct Counts {
     #[serde(default)]
     pub left_out: u64,
     /// Clusters of pieces of polylines cut because they outgrew
-    /// [`sweep::MAX_CLUSTER_VERTICES`]: lines across such a cut come out in two.
+    /// `sweep::MAX_CLUSTER_VERTICES`: lines across such a cut come out in two.
     #[serde(default)]
     pub clusters_cut: u64,
     /// Batches in which the curve stage completed, attributed and wrote the curves (see
-    /// [`groups`]): more as the curves outgrow a sixteenth of `--memory`.
+    /// `groups`): more as the curves outgrow a sixteenth of `--memory`.
     #[serde(default)]
     pub batches: u64,
 }

@@ -8,7 +8,7 @@ use glam::DVec3;
 /// Points are stored in Morton (Z-curve) order, or cell by cell in a grid (see `Cells`), so
 /// that consecutive points are spatial neighbours and per-point queries stay in cache; `ids`
 /// maps back to the caller's order.
-pub struct Cloud {
+pub(crate) struct Cloud {
     /// World position of the local origin.
     pub origin: DVec3,
     /// Local coordinates in f64: fits use these, so results do not depend on where the
@@ -41,14 +41,14 @@ pub struct Cloud {
 /// coordinates' rounding `slack` (see [`Cloud`]): membership is then decided in f64. (A
 /// relative margin alone missed points on the rim in tiles a few hundred metres wide, so a
 /// ball held different points depending on the tile's size.)
-pub fn query_radius(r: f64, slack: f64) -> f32 {
+pub(crate) fn query_radius(r: f64, slack: f64) -> f32 {
     (r * (1.0 + 1e-5) + slack) as f32 + f32::EPSILON
 }
 
 /// The rounding slack of f32 coordinates no larger than `extent` in magnitude (see [`Cloud`]):
 /// both ends of a distance may be rounded, by 2^-24 of `extent` on each axis, and 2^-21 of it
 /// bounds that with room to spare.
-pub fn rounding_slack(extent: f64) -> f64 {
+pub(crate) fn rounding_slack(extent: f64) -> f64 {
     extent * 2f64.powi(-21)
 }
 
@@ -64,22 +64,24 @@ fn spread(v: u64) -> u64 {
 }
 
 impl Cloud {
+    #[cfg(test)]
     /// Builds a cloud from world positions (global ids = their indices), with the origin at
     /// their minimum corner.
-    pub fn new(world: &[DVec3]) -> Cloud {
+    pub(crate) fn new(world: &[DVec3]) -> Cloud {
         let origin = world.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO);
         let gid: Vec<u64> = (0..world.len() as u64).collect();
         Cloud::with_origin(world, &gid, origin)
     }
 
+    #[cfg(test)]
     /// Builds a cloud from world positions and their global ids, with a given origin.
-    pub fn with_origin(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
+    pub(crate) fn with_origin(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
         Cloud::build(world, gids, origin, false, None)
     }
 
     /// As [`Cloud::with_origin`], with the sort (and the tree, once needed) built on the rayon
     /// pool (for a caller whose pool has nothing else to do meanwhile). The cloud is the same.
-    pub fn with_origin_parallel(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
+    pub(crate) fn with_origin_parallel(world: &[DVec3], gids: &[u64], origin: DVec3) -> Cloud {
         Cloud::build(world, gids, origin, true, None)
     }
 
@@ -87,14 +89,14 @@ impl Cloud {
     /// side `side`: [`Cloud::map_neighbourhoods`] then gathers each block's points from the
     /// grid, and builds no tree. Two gridded clouds of the same points and side store them in
     /// the same order. Sorted and indexed on the rayon pool if `parallel`.
-    pub fn gridded(world: &[DVec3], gids: &[u64], origin: DVec3, side: f64, parallel: bool) -> Cloud {
+    pub(crate) fn gridded(world: &[DVec3], gids: &[u64], origin: DVec3, side: f64, parallel: bool) -> Cloud {
         Cloud::build(world, gids, origin, parallel, Some(side))
     }
 
     /// The points `which` (stored indices, in increasing order) as a cloud of their own, with
     /// the same local coordinates; its `ids` are their stored indices in this cloud. Its tree is
     /// built serially (see [`Thinned::new`]).
-    pub fn subset(&self, which: &[u32]) -> Cloud {
+    pub(crate) fn subset(&self, which: &[u32]) -> Cloud {
         Cloud {
             origin: self.origin,
             pos: which.iter().map(|&i| self.pos[i as usize]).collect(),
@@ -142,7 +144,7 @@ impl Cloud {
     /// The cloud, whose neighbourhood passes stop within a block of `cancel` being set: the
     /// blocks not begun then give `T::default()`, and the caller, which sees the flag, must
     /// discard the result. (A tile's pass takes seconds; a block, milliseconds.)
-    pub fn cancelled_by(mut self, cancel: &crate::cancel::Cancel) -> Cloud {
+    pub(crate) fn cancelled_by(mut self, cancel: &crate::cancel::Cancel) -> Cloud {
         self.cancel = Some(cancel.clone());
         self
     }
@@ -150,14 +152,14 @@ impl Cloud {
     /// The stored indices of the points that `is_core` (indexed by the caller's order, see
     /// `ids`) flags as the tile's core, in stored order. (On the pool: serial, this left one
     /// core idle for a moment of every tile.)
-    pub fn core_points(&self, is_core: &[bool]) -> Vec<u32> {
+    pub(crate) fn core_points(&self, is_core: &[bool]) -> Vec<u32> {
         use rayon::prelude::*;
         (0..self.len() as u32).into_par_iter().filter(|&i| is_core[self.ids[i as usize] as usize]).collect()
     }
 
     /// The k-d tree over the points (built on first use: call it outside a parallel section
     /// to have a large tree built in parallel).
-    pub fn index(&self) -> &Index {
+    pub(crate) fn index(&self) -> &Index {
         self.index.get_or_init(|| {
             let points: Vec<[f32; 3]> = self.pos.iter().map(|p| p.as_vec3().to_array()).collect();
             if self.parallel {
@@ -169,18 +171,13 @@ impl Cloud {
     }
 
     /// Number of points.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.pos.len()
-    }
-
-    /// True if there is no point.
-    pub fn is_empty(&self) -> bool {
-        self.pos.is_empty()
     }
 
     /// Local position of point `i` in f64.
     #[inline]
-    pub fn at(&self, i: usize) -> DVec3 {
+    pub(crate) fn at(&self, i: usize) -> DVec3 {
         self.pos[i]
     }
 
@@ -190,7 +187,7 @@ impl Cloud {
     }
 
     /// Number of points within `r` of local position `q` (membership decided in f64).
-    pub fn count_within(&self, q: DVec3, r: f64, buf: &mut Vec<(u32, f32)>) -> usize {
+    pub(crate) fn count_within(&self, q: DVec3, r: f64, buf: &mut Vec<(u32, f32)>) -> usize {
         buf.clear();
         self.index().within(&q.as_vec3().to_array(), self.radius32(q, r), buf);
         buf.iter().filter(|a| self.pos[a.0 as usize].distance_squared(q) <= r * r).count()
@@ -199,7 +196,7 @@ impl Cloud {
     /// Indices (and squared distances) of the points within `r` of local position `q`, or the
     /// `min` nearest where the ball holds fewer (sparse regions of unevenly sampled scans); at
     /// most about `max` of them, an even subsample of the ball when there are more.
-    pub fn neighbours(&self, q: DVec3, r: f64, min: usize, max: usize, out: &mut Vec<(u32, f32)>) {
+    pub(crate) fn neighbours(&self, q: DVec3, r: f64, min: usize, max: usize, out: &mut Vec<(u32, f32)>) {
         self.neighbours_in(q, Neighbourhood { radius: r, reach: f64::INFINITY, min, max, ordered: true }, out)
     }
 
@@ -208,7 +205,7 @@ impl Cloud {
     /// the points come in the tree's order when they need not be subsampled (for
     /// order-insensitive uses such as least-squares sums, where only the last bits can depend
     /// on it).
-    pub fn neighbours_in(&self, q: DVec3, nb: Neighbourhood, out: &mut Vec<(u32, f32)>) {
+    pub(crate) fn neighbours_in(&self, q: DVec3, nb: Neighbourhood, out: &mut Vec<(u32, f32)>) {
         let Neighbourhood { radius: r, reach, min, max, ordered } = nb;
         out.clear();
         // Query the f32 tree a little wide, then decide membership in f64, so the ball holds
@@ -272,7 +269,7 @@ impl Cloud {
     /// neighbourhoods of `queries` points, if that many pay for ranking the whole cloud; call
     /// it outside any parallel section. Without the ranks, neighbourhoods are ordered by
     /// comparing coordinates, in the same order.
-    pub fn prepare_ordering(&self, queries: usize) {
+    pub(crate) fn prepare_ordering(&self, queries: usize) {
         if queries * 64 >= self.len() {
             self.rank.get_or_init(|| self.ranks());
         }
@@ -376,7 +373,7 @@ impl Cloud {
     /// Runs `f` on the neighbourhood (as [`Cloud::neighbours_in`] gives it) of every point in
     /// `which`, in parallel, returning the results in the order of `which` (see
     /// [`Cloud::map_neighbourhoods_at`]).
-    pub fn map_neighbourhoods<T: Send + Default, S>(
+    pub(crate) fn map_neighbourhoods<T: Send + Default, S>(
         &self,
         which: &[u32],
         nb: Neighbourhood,
@@ -423,7 +420,7 @@ impl Cloud {
     /// tree query), then each position's ball is cut from that list; a sparse ball is widened
     /// from a second, wider list of the block (gathered once, for the first that needs it).
     /// This gives the same sets as a query per position at a fraction of the cost.
-    pub fn map_neighbourhoods_at<T: Send + Default, S>(
+    pub(crate) fn map_neighbourhoods_at<T: Send + Default, S>(
         &self,
         at: &[DVec3],
         nb: Neighbourhood,
@@ -697,7 +694,7 @@ const MAX_BLOCK: usize = 64;
 
 /// What [`Cloud::map_neighbourhoods`] gathers around each point.
 #[derive(Clone, Copy, Debug)]
-pub struct Neighbourhood {
+pub(crate) struct Neighbourhood {
     /// Ball radius.
     pub radius: f64,
     /// Widest a sparse neighbourhood is widened to (never narrower than the ball). A tile holds every point within its halo
@@ -716,7 +713,7 @@ pub struct Neighbourhood {
 /// so on, for subsamples of balls far wider than the subsample (see
 /// [`Thinned::neighbours`]): the same points in any tiling, found by querying a level that
 /// holds a few times as many of the ball's points as are wanted, not the whole ball.
-pub struct Thinned<'a> {
+pub(crate) struct Thinned<'a> {
     cloud: &'a Cloud,
     /// Level k holds the points whose hash is below 2^64 / 8^(k+1) (densest first).
     levels: Vec<Cloud>,
@@ -733,7 +730,7 @@ const LEVEL_MIN: usize = 1024;
 impl<'a> Thinned<'a> {
     /// The levels of `cloud`, their trees built, on the calling thread (no rayon job: see
     /// `statistics::sample_round`).
-    pub fn new(cloud: &'a Cloud) -> Thinned<'a> {
+    pub(crate) fn new(cloud: &'a Cloud) -> Thinned<'a> {
         let mut levels = Vec::new();
         let below = |i: u32, k: u32| thinning_hash(cloud.gid[i as usize]) < u64::MAX >> (3 * k);
         let mut which: Vec<u32> = (0..cloud.len() as u32).filter(|&i| below(i, 1)).collect();
@@ -752,7 +749,7 @@ impl<'a> Thinned<'a> {
     /// The `max` points within `r` of local position `q` whose hashes are smallest (every
     /// point of the ball if it holds fewer), in coordinate order, as indices of the cloud with
     /// their squared distances: a uniform subsample, the same whichever level gave it.
-    pub fn neighbours(&self, q: DVec3, r: f64, max: usize, out: &mut Vec<(u32, f32)>) {
+    pub(crate) fn neighbours(&self, q: DVec3, r: f64, max: usize, out: &mut Vec<(u32, f32)>) {
         let nb = Neighbourhood { radius: r, reach: f64::INFINITY, min: 0, max: usize::MAX, ordered: false };
         // (From the sparsest level up: a level whose ball holds at least `max` points holds
         // every point of the ball with a smaller hash than its `max`th.)

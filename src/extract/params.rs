@@ -35,7 +35,7 @@ pub struct Params {
 }
 
 /// How stage 2 searches for the surfaces that meet at a candidate (see
-/// [`super::project::project`]).
+/// `super::project::project`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Model {
@@ -75,12 +75,12 @@ pub struct Resolved {
     /// The noise of the smoothest quarter of the sampled surfaces (the first quartile of the
     /// sampled noise): the scanner's own, which rough ground and vegetation inflate less than
     /// the median. What a surface must fit to within (see
-    /// [`SURFACE_NOISE`](super::project::SURFACE_NOISE)).
+    /// `SURFACE_NOISE`).
     #[serde(default)]
     pub surface_noise: f64,
-    /// Length unit of the defaults: max(kappa, [`NOISE_SCALE`] noise), so neighbourhoods outgrow
-    /// the noise, and under noise at least wide enough for a fit of [`MIN_NOISY_FIT`] points
-    /// (up to [`NOISY_FIT_NOISE`] deviations).
+    /// Length unit of the defaults: max(kappa, `NOISE_SCALE` noise), so neighbourhoods outgrow
+    /// the noise, and under noise at least wide enough for a fit of `MIN_NOISY_FIT` points
+    /// (up to `NOISY_FIT_NOISE` deviations).
     pub scale: f64,
     /// Share of points used by the fits (1: all; less when noise makes neighbourhoods large,
     /// each then averaged over the points around it: see [`Resolved::average`]).
@@ -89,17 +89,17 @@ pub struct Resolved {
     /// less only when [`Params::evaluate_per_fit`] asks for fewer than a fit's disk holds).
     /// The fits still see every point kept; the candidates and edge points are fewer, as
     /// dense on the scale of the neighbourhoods as `evaluate_per_fit` says. Under noise, where
-    /// a fit's disk holds up to [`TARGET_NEIGHBOURS`] points, this is several times faster, at
+    /// a fit's disk holds up to `TARGET_NEIGHBOURS` points, this is several times faster, at
     /// a cost in recall where features are weak or thin.
     #[serde(default = "every_point")]
     pub evaluate: f64,
     /// Radius of the ball over which each point kept of a thinned cloud is averaged (0: the
     /// points as they are): it is moved to the mean of the points within it, kept or not (a
     /// share of them, see [`Resolved::average_share`]), so that the points dropped still narrow
-    /// the noise (see [`AVERAGE_NOISE`]).
+    /// the noise (see `AVERAGE_NOISE`).
     #[serde(default)]
     pub average: f64,
-    /// Share of the points that the averaging takes (1: all; see [`AVERAGE_POINTS`]), drawn
+    /// Share of the points that the averaging takes (1: all; see `AVERAGE_POINTS`), drawn
     /// from the position key.
     #[serde(default = "every_point")]
     pub average_share: f64,
@@ -131,34 +131,34 @@ pub struct Resolved {
 }
 
 /// Default largest turn while growing, degrees.
-pub const DEFAULT_MAX_TURN_DEG: f64 = 30.0;
+pub(crate) const DEFAULT_MAX_TURN_DEG: f64 = 30.0;
 /// Default gentlest crease kept, degrees between the surface normals.
-pub const DEFAULT_MIN_ANGLE_DEG: f64 = 28.0;
+pub(crate) const DEFAULT_MIN_ANGLE_DEG: f64 = 28.0;
 /// Default seed of the robust fits' random streams.
-pub const DEFAULT_SEED: u64 = 1;
+pub(crate) const DEFAULT_SEED: u64 = 1;
 /// Neighbours a fit should see; denser clouds are thinned to about this many.
-pub const TARGET_NEIGHBOURS: f64 = 150.0;
+pub(crate) const TARGET_NEIGHBOURS: f64 = 150.0;
 /// Fit radius, in length units (see [`Resolved::scale`]).
-pub const FIT_SCALES: f64 = 6.0;
+pub(crate) const FIT_SCALES: f64 = 6.0;
 /// Fewest points a fit holds where the noise sizes the neighbourhoods (see [`NOISE_SCALE`]).
 /// At 2 point spacings of noise, 1.25 deviations make fits of about 35 points, and the quality
 /// table's 2-spacing row lost recall (chamfer 1.0 -> 0.97, blade 1.0 -> 0.94, fandisk 0.99 ->
 /// 0.98); 1.5 deviations of the noise as measured before made about 50; 150 found every
 /// feature but doubled fandisk's mean distance (0.00033 -> 0.00067 dB) and took 1.5 times as
 /// long.
-pub const MIN_NOISY_FIT: f64 = 50.0;
+pub(crate) const MIN_NOISY_FIT: f64 = 50.0;
 /// The length unit widens for [`MIN_NOISY_FIT`] up to this many noise deviations, so that it
 /// grows with the noise from the spacing on. (Widened only where 1.25 deviations exceed the
 /// spacing, a shared real scan whose noise is 0.76 spacings, `plane.laz`, fell back to the
 /// spacing, fits of about 28 points, and 61 curves on its plane; 4 with this, 6 before.)
-pub const NOISY_FIT_NOISE: f64 = 2.0;
+pub(crate) const NOISY_FIT_NOISE: f64 = 2.0;
 /// The default length unit is at least this many noise deviations, and under noise at least
 /// wide enough for a fit of [`MIN_NOISY_FIT`] points. (1.5 was chosen when the
 /// noise was measured within 16 spacings, which measured 0.77-0.9 of the deviation of the
 /// quality clouds' dB noise at 500 k points; measured within 5 deviations (see
 /// [`super::statistics::NOISE_BALL`]) it comes out 0.9-0.95 of it, and 1.25 sizes the
 /// neighbourhoods about as before at 0.02 dB, a little narrower at 0.01 and 0.005.)
-pub const NOISE_SCALE: f64 = 1.25;
+pub(crate) const NOISE_SCALE: f64 = 1.25;
 /// Radius, in noise deviations, of the ball over which each point kept of a thinned cloud is
 /// averaged (see [`Resolved::average`]). Thinning to [`TARGET_NEIGHBOURS`] a fit drops most of
 /// a noisy cloud (96 % of fandisk at 0.02 dB); averaging lets the points dropped narrow the
@@ -172,20 +172,20 @@ pub const NOISE_SCALE: f64 = 1.25;
 /// 0.01 0.00099 -> 0.00063 dB); radius 3 raised recall more (0.971 / 0.903 / 0.747) but moved
 /// the edge points off the truth where features are sharp and close (anchor at 0.01 mean
 /// 0.0025 -> 0.0032 dB, cylinder at 0.005 0.00054 -> 0.00091).
-pub const AVERAGE_NOISE: f64 = 2.0;
+pub(crate) const AVERAGE_NOISE: f64 = 2.0;
 /// Points about which a kept point is averaged (see [`AVERAGE_NOISE`]); where the ball holds
 /// more, a share of them is taken. The ball leans towards its own point's side more than its
 /// count narrows the noise: on a plane under uniform noise its mean deviates by about 0.6 of
 /// the noise with 78 points, of which the count's own part, 1 / sqrt(78), is 0.11; with 48
 /// points it is 0.14, the whole 0.62. A cloud thinned to 3 % holds about 270 points a ball,
 /// and averaging them all took longer than the fits.
-pub const AVERAGE_POINTS: f64 = 48.0;
+pub(crate) const AVERAGE_POINTS: f64 = 48.0;
 
 impl Resolved {
     /// True if every length is finite and positive (the noise lengths not negative), every
     /// share in (0, 1] and every angle within its range: what the statistics pass gives. A
     /// manifest edited by hand (a step of -1) gave 0 curves and exit 0.
-    pub fn is_sane(&self) -> bool {
+    pub(crate) fn is_sane(&self) -> bool {
         let positive = [self.kappa, self.scale, self.fit_radius, self.rmls_radius, self.min_threshold, self.step, self.corner_radius, self.reach_steps];
         let not_negative = [self.noise, self.surface_noise, self.average];
         let shares = [self.keep, self.evaluate, self.average_share, self.linearity];
@@ -209,14 +209,14 @@ impl Resolved {
     /// `BLOCK_CELL` in `cloud.rs`) for the residual pass, whose many cheap fits feel it most.
     /// (10 M scene, two runs each: 52.9-54.1 s of CPU; 52.9-56.5 s with 1.5 times the mean of
     /// the radii, 55.1-56.4 s with 1.5 projection radii.)
-    pub fn cell_side(&self) -> f64 {
+    pub(crate) fn cell_side(&self) -> f64 {
         1.5 * self.fit_radius
     }
 
     /// True if the neighbourhoods are sized by the noise rather than by the spacing (see
     /// [`NOISE_SCALE`]): the candidates then also take the crease test (see
     /// [`CREASE_RATIO`](super::candidates::CREASE_RATIO)), and edge points the consensus filter (see [`consensus`](super::consensus)).
-    pub fn noise_limited(&self) -> bool {
+    pub(crate) fn noise_limited(&self) -> bool {
         self.scale > self.kappa
     }
 }
@@ -267,7 +267,7 @@ impl Params {
 
     /// The same parameters with those given at their default value left unset, so that a job
     /// that names a default (`--seed 1`) is the job that does not.
-    pub fn without_defaults(&self) -> Params {
+    pub(crate) fn without_defaults(&self) -> Params {
         let unless = |v: Option<f64>, default: f64| v.filter(|&x| x != default);
         Params {
             max_turn_deg: unless(self.max_turn_deg, DEFAULT_MAX_TURN_DEG),
@@ -279,7 +279,8 @@ impl Params {
     }
 
     /// Resolves defaults given the measured spacing `kappa` and noise `noise`.
-    pub fn resolve(&self, kappa: f64, noise: f64) -> Resolved {
+    #[cfg(test)]
+    pub(crate) fn resolve(&self, kappa: f64, noise: f64) -> Resolved {
         self.resolve_at_least(kappa, noise, 0.0)
     }
 
@@ -322,7 +323,7 @@ fn every_point() -> f64 {
 /// Resolves the parameters from the sampled statistics: spacing and noise are their medians;
 /// `keep` thins the cloud so that a fit sees about [`TARGET_NEIGHBOURS`] points. A kappa given
 /// by the user replaces the measured one.
-pub fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
+pub(crate) fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
     let mut k: Vec<f64> = stats.iter().map(|s| s.spacing).collect();
     let mut n: Vec<f64> = stats.iter().map(|s| s.noise).collect();
     let mut d: Vec<f64> = stats.iter().map(|s| s.density).collect();

@@ -17,7 +17,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 /// Snaps an edge point's position to quantum `q` and its normals to a millionth.
-pub fn snap_edge(e: &mut WorldEdge, q: f64) {
+pub(crate) fn snap_edge(e: &mut WorldEdge, q: f64) {
     e.p = snap(e.p, q);
     e.n = e.n.map(|n| (n * 1e6).round() / 1e6 + glam::Vec3::ZERO);
 }
@@ -38,7 +38,7 @@ const MIN_CORNER_SUPPORT: usize = 3;
 /// no point within the radius of another part's corners are grouped with the part
 /// ([`CornerGrouping::part`]); only the others are kept, to be grouped together at the end
 /// ([`CornerGrouping::finish`]): the corner points near the parts' borders, not the cloud's.
-pub struct CornerGrouping {
+pub(crate) struct CornerGrouping {
     origin: DVec3,
     q: f64,
     radius: f64,
@@ -50,7 +50,7 @@ pub struct CornerGrouping {
 /// A group of corner points: the member that stands for it (relative to the origin), and the
 /// weight and position of its seed, which set its place in the order of all groups.
 #[derive(Clone, Copy, Debug)]
-pub struct CornerGroup {
+pub(crate) struct CornerGroup {
     at: DVec3,
     w: f64,
     key: [u64; 3],
@@ -59,14 +59,14 @@ pub struct CornerGroup {
 /// What a part's corner points give: their groups, and the components to be grouped with
 /// those of other parts.
 #[derive(Debug, Default)]
-pub struct PartCorners {
+pub(crate) struct PartCorners {
     groups: Vec<CornerGroup>,
     shared: Vec<WorldCorner>,
 }
 
 impl CornerGrouping {
     /// The snapped bounds of `corners` (none if empty), for [`CornerGrouping::new`].
-    pub fn bounds(corners: &[WorldCorner], r: &Resolved) -> Option<(DVec3, DVec3)> {
+    pub(crate) fn bounds(corners: &[WorldCorner], r: &Resolved) -> Option<(DVec3, DVec3)> {
         let q = snap_quantum(r.kappa);
         let p = corners.iter().map(|c| snap(c.p, q));
         p.clone().reduce(DVec3::min).zip(p.reduce(DVec3::max))
@@ -74,14 +74,14 @@ impl CornerGrouping {
 
     /// Grouping of the corner points of parts whose [`CornerGrouping::bounds`] are `bounds`,
     /// the groups relative to `origin`.
-    pub fn new(bounds: &[Option<(DVec3, DVec3)>], origin: DVec3, r: &Resolved) -> CornerGrouping {
+    pub(crate) fn new(bounds: &[Option<(DVec3, DVec3)>], origin: DVec3, r: &Resolved) -> CornerGrouping {
         let boxes = bounds.iter().map(|b| b.map(|(lo, hi)| (lo - origin, hi - origin))).collect();
         CornerGrouping { origin, q: snap_quantum(r.kappa), radius: r.corner_radius, boxes }
     }
 
     /// The groups of the components of part `part`'s corner points that are its alone; the
     /// other components' points are kept for [`CornerGrouping::finish`].
-    pub fn part(&self, part: usize, corners: Vec<WorldCorner>) -> PartCorners {
+    pub(crate) fn part(&self, part: usize, corners: Vec<WorldCorner>) -> PartCorners {
         let Some(own) = self.boxes[part] else {
             debug_assert!(corners.is_empty(), "a part's corners out of its bounds");
             return PartCorners::default();
@@ -104,7 +104,7 @@ impl CornerGrouping {
     }
 
     /// All groups: those of every part (in any order) and those of the components they share.
-    pub fn finish(&self, parts: impl IntoIterator<Item = PartCorners>) -> Vec<DVec3> {
+    pub(crate) fn finish(&self, parts: impl IntoIterator<Item = PartCorners>) -> Vec<DVec3> {
         let (mut groups, mut shared) = (vec![], vec![]);
         for p in parts {
             groups.extend(p.groups);
@@ -163,14 +163,14 @@ fn components(points: &[project::CornerPoint], radius: f64) -> Vec<Vec<usize>> {
 /// Largest distance from an edge point to the edge points that move it in stage 3: a block
 /// of the edge cloud is smoothed exactly as in the whole cloud if every edge point this close
 /// to the block is given as context.
-pub fn smoothing_reach(r: &Resolved) -> f64 {
+pub(crate) fn smoothing_reach(r: &Resolved) -> f64 {
     2.0 * r.rmls_radius
 }
 
 /// Stage 3 for a block of the (snapped) edge cloud, positions relative to `origin`: the first
 /// `own` points are smoothed, the rest are the context within [`smoothing_reach`] of them.
 /// The smoothed positions are snapped as the input is.
-pub fn smooth_block(points: &[DVec3], own: usize, grouped: &[DVec3], r: &Resolved) -> Vec<DVec3> {
+pub(crate) fn smooth_block(points: &[DVec3], own: usize, grouped: &[DVec3], r: &Resolved) -> Vec<DVec3> {
     let sp = smooth::SmoothParams { linearity: r.linearity, max_radius: smoothing_reach(r) };
     let q = snap_quantum(r.kappa);
     let mut out = smooth::smooth(points, own, grouped, &sp);
@@ -183,7 +183,7 @@ pub fn smooth_block(points: &[DVec3], own: usize, grouped: &[DVec3], r: &Resolve
 /// Smoothed edge points (positions relative to an origin, and the normals of each point's two
 /// surfaces), as stage 4 takes them.
 #[derive(Clone, Debug, Default)]
-pub struct SmoothedEdges {
+pub(crate) struct SmoothedEdges {
     /// Smoothed positions.
     pub points: Vec<DVec3>,
     /// The two surface normals of each.
@@ -195,7 +195,7 @@ pub struct SmoothedEdges {
 impl SmoothedEdges {
     /// Puts the points in the order of their positions, then normals, so that what follows
     /// does not depend on the order they came in. (Points equal in both are interchangeable.)
-    pub fn sort(&mut self) {
+    pub(crate) fn sort(&mut self) {
         let (p, n) = (&self.points, &self.normals);
         let mut perm: Vec<u32> = (0..p.len() as u32).collect();
         perm.par_sort_unstable_by(|&a, &b| {
@@ -212,7 +212,7 @@ impl SmoothedEdges {
 /// context included): the smoothed positions of the first `own` points, and whether their
 /// neighbours confirm each (see [`consensus`]). (The smoothing takes every edge point as
 /// context, confirmed or not, so that the block's context need reach no further.)
-pub fn smooth_and_confirm(points: &[DVec3], normals: &[[glam::Vec3; 2]], own: usize, grouped: &[DVec3], r: &Resolved) -> (Vec<DVec3>, Vec<bool>) {
+pub(crate) fn smooth_and_confirm(points: &[DVec3], normals: &[[glam::Vec3; 2]], own: usize, grouped: &[DVec3], r: &Resolved) -> (Vec<DVec3>, Vec<bool>) {
     let smoothed = smooth_block(points, own, grouped, r);
     // (Without noise, edge points off a crease are rare and the filter mostly cut sparse
     // stretches into more pieces: nonuniformly sampled fandisk 34 -> 45 curves, the 5 M scene
@@ -223,7 +223,7 @@ pub fn smooth_and_confirm(points: &[DVec3], normals: &[[glam::Vec3; 2]], own: us
 
 /// How far past a block's core its edge points are needed to grow, smooth and confirm its
 /// core's polylines as in the whole cloud: the growing halo, and the smoothing reach beyond it.
-pub fn block_context(r: &Resolved) -> (f64, f64) {
+pub(crate) fn block_context(r: &Resolved) -> (f64, f64) {
     let halo = blocks::HALO_STEPS * r.step;
     (halo, halo + smoothing_reach(r).max(r.step))
 }
@@ -232,7 +232,7 @@ pub fn block_context(r: &Resolved) -> (f64, f64) {
 /// order, see [`SmoothedEdges::sort`]) on through those of its halo (`halo`, in order), cut
 /// to what the block owns (see [`blocks::cut`]; `b` is its number in `blocks`). Once `cancel`
 /// is set, what comes back is partial.
-pub fn grow_block(core: &[DVec3], halo: &[DVec3], blocks: &Blocks, b: u32, r: &Resolved, cancel: &crate::cancel::Cancel) -> Vec<Piece> {
+pub(crate) fn grow_block(core: &[DVec3], halo: &[DVec3], blocks: &Blocks, b: u32, r: &Resolved, cancel: &crate::cancel::Cancel) -> Vec<Piece> {
     let points: Vec<DVec3> = core.iter().chain(halo).copied().collect();
     if points.is_empty() {
         return vec![];
@@ -244,7 +244,7 @@ pub fn grow_block(core: &[DVec3], halo: &[DVec3], blocks: &Blocks, b: u32, r: &R
 }
 
 /// Completion's parameters (stage 5) for the resolved parameters `r`.
-pub fn complete_params(r: &Resolved) -> complete::CompleteParams {
+pub(crate) fn complete_params(r: &Resolved) -> complete::CompleteParams {
     complete::CompleteParams {
         step: r.step,
         reach: r.reach_steps,
@@ -257,7 +257,7 @@ pub fn complete_params(r: &Resolved) -> complete::CompleteParams {
 
 /// The smoothed edge points near a curve, indexed: what a curve's vertex normals and evidence
 /// are taken from, a region at a time.
-pub struct NearEdges<'a> {
+pub(crate) struct NearEdges<'a> {
     index: Index,
     normals: &'a [[glam::Vec3; 2]],
     step: f64,
@@ -266,7 +266,7 @@ pub struct NearEdges<'a> {
 impl<'a> NearEdges<'a> {
     /// Indexes `points` (in order, see [`SmoothedEdges::sort`]) with their `normals`. Queries
     /// look half a step around them.
-    pub fn new(points: &[DVec3], normals: &'a [[glam::Vec3; 2]], step: f64) -> NearEdges<'a> {
+    pub(crate) fn new(points: &[DVec3], normals: &'a [[glam::Vec3; 2]], step: f64) -> NearEdges<'a> {
         NearEdges { index: Index::new(&points.iter().map(|q| q.as_vec3().to_array()).collect::<Vec<_>>()), normals, step }
     }
 
@@ -279,7 +279,7 @@ impl<'a> NearEdges<'a> {
 
     /// The mean normal pair of the edge points within half a step of `p`, if any, oriented as
     /// most of those points orient theirs (see `Orientation`).
-    pub fn normals_at(&self, p: DVec3) -> Option<[DVec3; 2]> {
+    pub(crate) fn normals_at(&self, p: DVec3) -> Option<[DVec3; 2]> {
         let own = self.own_pairs_at(p, &mut vec![]);
         let first = *own.first()?;
         let mut votes = Orientation::default();
@@ -305,7 +305,7 @@ impl<'a> NearEdges<'a> {
 
     /// How well the normal pairs of the edge points within half a step of `p` agree with their
     /// mean (see [`Evidence::agreement`]), if there are any.
-    pub fn agreement_at(&self, p: DVec3) -> Option<f64> {
+    pub(crate) fn agreement_at(&self, p: DVec3) -> Option<f64> {
         let pairs = self.pairs_at(p, &mut vec![]);
         if pairs.is_empty() {
             return None;
@@ -318,7 +318,7 @@ impl<'a> NearEdges<'a> {
 
 /// The places, every half step along the curve through `v` (closed if `closed`), at which its
 /// evidence is looked at.
-pub fn places(v: &[DVec3], closed: bool, step: f64) -> Vec<DVec3> {
+pub(crate) fn places(v: &[DVec3], closed: bool, step: f64) -> Vec<DVec3> {
     let mut places = vec![];
     let n = v.len();
     let segments = if closed && n > 2 { n } else { n.saturating_sub(1) };
@@ -337,7 +337,7 @@ pub fn places(v: &[DVec3], closed: bool, step: f64) -> Vec<DVec3> {
 /// pair near each vertex (zero where none is known), and over the [`places`] along it, how many
 /// have edge points near and how well those agree (summed).
 #[derive(Clone, Debug, Default)]
-pub struct Gathered {
+pub(crate) struct Gathered {
     /// Per vertex, the mean normal pair of the edge points within half a step.
     pub normals: Vec<[glam::Vec3; 2]>,
     /// Places with edge points near.
@@ -348,7 +348,7 @@ pub struct Gathered {
 
 impl Gathered {
     /// Nothing gathered yet, for a curve of `n` vertices.
-    pub fn new(n: usize) -> Gathered {
+    pub(crate) fn new(n: usize) -> Gathered {
         Gathered { normals: vec![[glam::Vec3::ZERO; 2]; n], covered: 0, agreement: 0.0 }
     }
 }
@@ -357,7 +357,7 @@ impl Gathered {
 /// coordinates, from positions relative to `origin`): the normals take the orientation most
 /// of its vertices have (see `Orientation`), vertices without normals take their
 /// neighbours', and the evidence gives the confidence.
-pub fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
+pub(crate) fn finish(id: u32, c: complete::Curve, g: Gathered, origin: DVec3, step: f64) -> Polyline {
     // Each normal is aligned with the one before it along the curve, so that it turns smoothly
     // round bends; the orientation is then the one most vertices have.
     let mut prev: Option<[DVec3; 2]> = None;
@@ -410,12 +410,12 @@ fn fill_from_neighbours(normals: &mut [[DVec3; 2]]) {
 
 /// The length, in polyline steps, over which a curve's length term of confidence rises to 1 -
 /// 1/e (see [`Evidence::confidence`]): a curve of one step has 0.39 of it, of six steps 0.95.
-pub const CONFIDENT_STEPS: f64 = 2.0;
+pub(crate) const CONFIDENT_STEPS: f64 = 2.0;
 /// Agreement of the edge points' normals (mean cosine to their mean) at which confidence is
 /// zero. On the noisy quality clouds, curves on the truth agree at 0.96-0.99 (quartiles), and
 /// the 5 % least agreeing at 0.90; on the real aerial scan autzen, half the curves fall below
 /// 0.93.
-pub const AGREEMENT_FLOOR: f64 = 0.7;
+pub(crate) const AGREEMENT_FLOOR: f64 = 0.7;
 /// Curves below this confidence are left out of the outputs by default (`--min-confidence`).
 /// Over 90 noisy extractions of the quality clouds (nine shapes, five noise levels), 0.2 left
 /// out 0.15 % of the length of curves on the truth and 1.1 % of the length of the others;
@@ -426,7 +426,7 @@ pub const DEFAULT_MIN_CONFIDENCE: f64 = 0.2;
 /// What speaks for a curve being a feature of the surface: the edge points along it, looked
 /// at every half step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Evidence {
+pub(crate) struct Evidence {
     /// Length, in polyline steps.
     pub length_steps: f64,
     /// Share of the places looked at that have an edge point within half a step (the rest is
@@ -441,7 +441,7 @@ impl Evidence {
     /// The curve's confidence, 0 to 1: the product of its coverage, a length term that
     /// saturates over a few steps (1 - exp(-length / [`CONFIDENT_STEPS`])), and its agreement
     /// above [`AGREEMENT_FLOOR`], rescaled to 0-1.
-    pub fn confidence(&self) -> f64 {
+    pub(crate) fn confidence(&self) -> f64 {
         let length = 1.0 - (-self.length_steps / CONFIDENT_STEPS).exp();
         let agreement = ((self.agreement - AGREEMENT_FLOOR) / (1.0 - AGREEMENT_FLOOR)).clamp(0.0, 1.0);
         self.coverage * length * agreement

@@ -38,7 +38,7 @@ use serde::{Deserialize, Serialize};
 
 /// A candidate projected onto the intersection of two surfaces.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct EdgePoint {
+pub(crate) struct EdgePoint {
     /// Local position on the feature.
     pub p: DVec3,
     /// Unit normals of the two surfaces.
@@ -47,7 +47,7 @@ pub struct EdgePoint {
 
 /// A candidate's solution of three surfaces meeting.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CornerPoint {
+pub(crate) struct CornerPoint {
     /// Local position of the corner.
     pub p: DVec3,
     /// Weight 1 / |corner - edge point| (larger: more trustworthy).
@@ -56,7 +56,7 @@ pub struct CornerPoint {
 
 /// Parameters of the robust projection.
 #[derive(Clone, Copy, Debug)]
-pub struct ProjectParams {
+pub(crate) struct ProjectParams {
     /// Neighbourhood radius.
     pub radius: f64,
     /// Widest a sparse neighbourhood is widened to (see [`Neighbourhood::reach`]).
@@ -82,7 +82,7 @@ pub struct ProjectParams {
 
 /// What projection made of one candidate.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct Projected {
+pub(crate) struct Projected {
     /// Edge point, if the candidate lies near two or more surfaces.
     pub edge: Option<EdgePoint>,
     /// Corner point, if three or more surfaces meet and their corner is near.
@@ -183,7 +183,7 @@ const CORE_FRACTION: f64 = 0.5;
 /// scatter (tree crowns, hedges) splits into "surfaces" as readily as a solid does, but none
 /// of them fits: their RMS is the scatter's thickness within the ball, tens of noise
 /// deviations.
-pub const SURFACE_NOISE: f64 = 4.0;
+pub(crate) const SURFACE_NOISE: f64 = 4.0;
 /// How near the edge line the data must come, in noise deviations (see [`reaches_the_edge`]).
 const ON_DATA_NOISE: f64 = 2.0;
 /// Least share of the points within three times [`ON_DATA_NOISE`] of an edge line that must lie
@@ -211,7 +211,7 @@ const MAX_SURFACES: usize = 4;
 
 /// A point of the edge cloud in world coordinates, with the normals of its two surfaces.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct WorldEdge {
+pub(crate) struct WorldEdge {
     /// Position.
     pub p: DVec3,
     /// Surface normals.
@@ -220,7 +220,7 @@ pub struct WorldEdge {
 
 /// A corner point in world coordinates with its grouping weight.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct WorldCorner {
+pub(crate) struct WorldCorner {
     /// Position.
     pub p: DVec3,
     /// Weight 1 / |corner - edge point|.
@@ -229,7 +229,7 @@ pub struct WorldCorner {
 
 /// What stage 2 made of one tile's candidates.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct TileEdges {
+pub(crate) struct TileEdges {
     /// Edge points.
     pub edges: Vec<WorldEdge>,
     /// Corner points.
@@ -247,7 +247,7 @@ pub struct TileEdges {
 /// parameters `r`. `band` flags every point of the cloud, core and halo, that is a candidate
 /// (see [`super::candidates::band_of`]); the patches model needs it, and without it takes
 /// `candidates` for the only ones. Returns edge and corner points in world coordinates.
-pub fn tile_edges(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, r: &Resolved) -> TileEdges {
+pub(crate) fn tile_edges(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, r: &Resolved) -> TileEdges {
     let pp = ProjectParams {
         radius: r.rmls_radius,
         reach: r.halo(),
@@ -270,7 +270,7 @@ pub fn tile_edges(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, r: &
 
 /// Projects every candidate (by index into `cloud`) by the model `p.model` asks for; `band`
 /// as [`tile_edges`] takes it.
-pub fn project(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, p: &ProjectParams) -> Vec<Projected> {
+pub(crate) fn project(cloud: &Cloud, candidates: &[u32], band: Option<&[bool]>, p: &ProjectParams) -> Vec<Projected> {
     match p.model {
         Model::Balls => project_each(cloud, candidates, None, p),
         Model::Cells => project_cells(cloud, candidates, p),
@@ -1097,16 +1097,17 @@ fn half_surfaces(a: &Surface, b: &Surface, x: DVec3, tol: f64) -> Option<Sides> 
     (t != DVec3::ZERO && da != DVec3::ZERO && db != DVec3::ZERO).then_some(Sides { e, t, da, db, w })
 }
 
+#[cfg(test)]
 /// Groups corner points within `radius`: heaviest first, each group keeps the member nearest
 /// to the group's weighted mean (Daniels 2007). Groups with fewer than `min_support` members are
 /// dropped as accidental.
-pub fn group_corners(corners: &[CornerPoint], radius: f64, min_support: usize) -> Vec<DVec3> {
+pub(crate) fn group_corners(corners: &[CornerPoint], radius: f64, min_support: usize) -> Vec<DVec3> {
     seeded_groups(corners, radius, min_support).into_iter().map(|(_, p)| p).collect()
 }
 
 /// [`group_corners`], each group with its seed: the heaviest member, which formed it (by its
 /// index in `corners`, whose order breaks ties of weight).
-pub fn seeded_groups(corners: &[CornerPoint], radius: f64, min_support: usize) -> Vec<(usize, DVec3)> {
+pub(crate) fn seeded_groups(corners: &[CornerPoint], radius: f64, min_support: usize) -> Vec<(usize, DVec3)> {
     if corners.is_empty() {
         return vec![];
     }

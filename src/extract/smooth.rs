@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 /// Smoothing parameters.
 #[derive(Clone, Copy, Debug)]
-pub struct SmoothParams {
+pub(crate) struct SmoothParams {
     /// Grow until (l0 - l1) / (l0 + l1) reaches this.
     pub linearity: f64,
     /// Largest neighbourhood radius.
@@ -31,7 +31,7 @@ const FIRST_K: usize = 17;
 /// `corners` cap the neighbourhoods. The result depends only on the set of points within the
 /// largest radius of each smoothed point, not on their order or on what lies further out, so a
 /// cloud smoothed block by block gives what it gives smoothed whole.
-pub fn smooth(points: &[DVec3], own: usize, corners: &[DVec3], p: &SmoothParams) -> Vec<DVec3> {
+pub(crate) fn smooth(points: &[DVec3], own: usize, corners: &[DVec3], p: &SmoothParams) -> Vec<DVec3> {
     if points.len() < MIN_K {
         return points[..own].to_vec();
     }

@@ -16,24 +16,24 @@ use glam::{DVec3, I64Vec3};
 use rayon::prelude::*;
 
 /// About this many points of a cloud are sampled (by position key).
-pub const STAT_SAMPLES: f64 = 20_000.0;
+pub(crate) const STAT_SAMPLES: f64 = 20_000.0;
 
 /// How much wider than its first halo the statistics pass may reload a tile (see
 /// [`tile_statistics`]): wide enough for the noise ball of a dense noisy cloud (5 deviations
 /// of 0.02 dB noise on 10 M points of fandisk: about 230 spacings, against the first halo's
 /// 24). Samples whose neighbourhood is wider still (isolated points) keep what the widest
 /// halo holds.
-pub const STATS_HALO_GROWTH: f64 = 16.0;
+pub(crate) const STATS_HALO_GROWTH: f64 = 16.0;
 /// The widest halo, in first halos, that later tiles are first loaded with because earlier
 /// ones asked for it (see [`tile_statistics`]): enough for the noise balls of 10 M points of
 /// fandisk at 0.01 dB (3-3.4), and bounded so that a cloud whose sparse patches ask for the
 /// widest halo does not have every tile held that wide, two at a time (the one computed and
 /// the one loaded meanwhile). A tile that needs more is loaded again, as before.
-pub const STATS_HALO_HINT: f64 = 4.0;
+pub(crate) const STATS_HALO_HINT: f64 = 4.0;
 
 /// What one sampled point says about the cloud.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PointStats {
+pub(crate) struct PointStats {
     /// Spacing (median nearest-neighbour distance, from the 16th neighbour).
     pub spacing: f64,
     /// Noise: RMS residual about a quadric within 16 spacings, or [`NOISE_BALL`] deviations.
@@ -44,7 +44,7 @@ pub struct PointStats {
 
 /// True if the point with key `key` is one of the statistics sample in a cloud of `total`
 /// points.
-pub fn stat_sample(key: u64, total: u64, seed: u64) -> bool {
+pub(crate) fn stat_sample(key: u64, total: u64, seed: u64) -> bool {
     keep_point(key ^ crate::salts::STATISTICS_SAMPLE, STAT_SAMPLES / total.max(1) as f64, seed)
 }
 
@@ -55,7 +55,7 @@ pub fn stat_sample(key: u64, total: u64, seed: u64) -> bool {
 /// deviation of 0.0121 across the surface: 0.0109 on 500 k points, 0.0065 on 10 M). A wider
 /// ball takes in more of the surface's curvature (8 deviations: 0.0279 at 0.02 dB, whose
 /// deviation is 0.0242).
-pub const NOISE_BALL: f64 = 5.0;
+pub(crate) const NOISE_BALL: f64 = 5.0;
 /// Most points a noise fit takes: an even subsample of a 16-spacing ball that holds more, and
 /// a uniform one of a wider ball (its points of smallest hash, see [`Thinned`]).
 const NOISE_FIT_POINTS: usize = 128;
@@ -65,7 +65,7 @@ const NOISE_FIT_POINTS: usize = 128;
 /// spacings, or within [`NOISE_BALL`] deviations if the deviation so measured asks for a
 /// wider ball (the noise; the ball grows up to twice), whose points `thinned()` subsamples
 /// (asked for only then). Also returns the widest radius read.
-pub fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<'c>, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<(PointStats, f64)> {
+pub(crate) fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t Thinned<'c>, i: usize, buf: &mut Vec<(u32, f32)>) -> Option<(PointStats, f64)> {
     const K: usize = 16;
     buf.clear();
     // (A few more than K + 1 from the f32 tree, whose distances depend on the tile's origin in
@@ -207,7 +207,7 @@ pub(crate) fn quantile(v: &mut [f64], q: f64) -> f64 {
 /// A tile as the statistics pass sees it: the core box, the first halo, the position key
 /// quantum, the cloud's point count, and the seed of the sampling.
 #[derive(Clone, Copy, Debug)]
-pub struct StatsTile {
+pub(crate) struct StatsTile {
     /// The tile's core.
     pub core: Bounds,
     /// The halo the tile was first loaded with.
@@ -231,7 +231,7 @@ pub struct StatsTile {
 /// [`NOISE_BALL`]), so it can reach past the halo, and then it would depend on where the tile
 /// borders fall. Such samples are computed again with the tile reloaded with a halo wide
 /// enough for them (up to [`STATS_HALO_GROWTH`] times `tile.halo`).
-pub fn tile_statistics(
+pub(crate) fn tile_statistics(
     first: (TilePoints, Vec<bool>),
     loaded: f64,
     tile: &StatsTile,
@@ -341,7 +341,7 @@ fn sample_round(tp: &TilePoints, is_core: &[bool], todo: Option<&[u64]>, reach: 
 
 /// Local origin of a loaded tile: the minimum corner of its points (fits are computed in f64,
 /// so the choice only moves the last bits).
-pub fn tile_origin(tp: &TilePoints) -> DVec3 {
+pub(crate) fn tile_origin(tp: &TilePoints) -> DVec3 {
     tp.xyz.iter().copied().reduce(DVec3::min).unwrap_or(DVec3::ZERO)
 }
 

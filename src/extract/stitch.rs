@@ -14,30 +14,18 @@ use std::collections::HashMap;
 /// Crossings of two pieces this close, in polyline steps, may be paired. (Both sides' traces
 /// follow the same smoothed edge points, so their crossings lie a small part of a step apart;
 /// a parallel crease is rarely as close.)
-pub const JOIN_STEPS: f64 = 0.5;
+pub(crate) const JOIN_STEPS: f64 = 0.5;
 /// Joined end vertices this close, in steps, become one.
-pub const MERGE_STEPS: f64 = 0.25;
+pub(crate) const MERGE_STEPS: f64 = 0.25;
 
 /// A stitched polyline: its vertices, and whether it is closed.
-pub type Line = (Vec<DVec3>, bool);
+pub(crate) type Line = (Vec<DVec3>, bool);
 
 /// Joins `pieces` (each with the block it came from, in a fixed order) into polylines, in the
 /// order of their first piece. Crossings within `reach` of each other are paired; where two
 /// joined vertices lie within `merge`, they become one at their midpoint. (The curve stage
 /// stitches a cluster of pieces at a time, see [`super::sweep`].)
-///
-/// ```
-/// use crease::extract::blocks::Piece;
-/// use crease::extract::stitch::stitch;
-/// use glam::DVec3;
-///
-/// let x = |x: f64| DVec3::new(x, 0.0, 0.0);
-/// let left = Piece { v: vec![x(-2.0), x(-0.5)], ends: [None, Some(x(0.0))], closed: false };
-/// let right = Piece { v: vec![x(0.6), x(2.0)], ends: [Some(x(0.01)), None], closed: false };
-/// let lines = stitch(vec![(0, left), (1, right)], 0.5, 0.1);
-/// assert_eq!(lines, vec![(vec![x(-2.0), x(-0.5), x(0.6), x(2.0)], false)]);
-/// ```
-pub fn stitch(mut pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
+pub(crate) fn stitch(mut pieces: Vec<(u32, Piece)>, reach: f64, merge: f64) -> Vec<Line> {
     let links = pair_crossings(&pieces, reach);
     let mut seen = vec![false; pieces.len()];
     let mut out = vec![];
@@ -275,5 +263,18 @@ mod tests {
         // Pieces meeting from the same side of a border are not joined.
         let same = vec![(0, piece(vec![x(-1.0, 0.0)], None, Some(x(0.0, 0.0)))), (1, piece(vec![x(-0.5, 0.1)], None, Some(x(0.0, 0.05))))];
         assert_eq!(stitch(same, 0.5, 0.01).len(), 0, "single vertices, unjoined, are no polylines");
+    }
+
+    #[test]
+    fn two_pieces_of_a_cut_line_are_stitched() {
+        use crate::extract::blocks::Piece;
+        use crate::extract::stitch::stitch;
+        use glam::DVec3;
+
+        let x = |x: f64| DVec3::new(x, 0.0, 0.0);
+        let left = Piece { v: vec![x(-2.0), x(-0.5)], ends: [None, Some(x(0.0))], closed: false };
+        let right = Piece { v: vec![x(0.6), x(2.0)], ends: [Some(x(0.01)), None], closed: false };
+        let lines = stitch(vec![(0, left), (1, right)], 0.5, 0.1);
+        assert_eq!(lines, vec![(vec![x(-2.0), x(-0.5), x(0.6), x(2.0)], false)]);
     }
 }

@@ -32,7 +32,7 @@ use glam::DVec3;
 /// A piece in the sweep: its number (pieces are numbered in a fixed order, whatever the
 /// slabs), the block it was grown in, and the piece.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Held {
+pub(crate) struct Held {
     /// The piece's number.
     pub id: u64,
     /// Its block.
@@ -58,10 +58,10 @@ impl Held {
 /// Most vertices a cluster's pieces may hold before the pieces the sweep is past are cut off
 /// and handed on (see the module notes): about 40 MB while the cluster is stitched and
 /// completed, and some hundred times the largest cluster we have seen (in a wooded aerial scan).
-pub const MAX_CLUSTER_VERTICES: usize = 1 << 18;
+pub(crate) const MAX_CLUSTER_VERTICES: usize = 1 << 18;
 
 /// The sweep: the pieces whose clusters may still grow.
-pub struct Sweep {
+pub(crate) struct Sweep {
     axis: usize,
     join: f64,
     link: f64,
@@ -77,22 +77,23 @@ pub struct Sweep {
 impl Sweep {
     /// A sweep along `axis` that clusters pieces whose crossings lie within `join`, or a vertex
     /// of one within `link` of an end vertex of the other.
-    pub fn new(axis: usize, join: f64, link: f64) -> Sweep {
+    pub(crate) fn new(axis: usize, join: f64, link: f64) -> Sweep {
         Sweep { axis, join, link, most: MAX_CLUSTER_VERTICES, cuts: 0, front: vec![] }
     }
 
+    #[cfg(test)]
     /// The same sweep with clusters cut once they hold more than `most` vertices.
-    pub fn bounded(self, most: usize) -> Sweep {
+    pub(crate) fn bounded(self, most: usize) -> Sweep {
         Sweep { most, ..self }
     }
 
     /// The number of times a cluster was cut because it outgrew the bound.
-    pub fn cuts(&self) -> u64 {
+    pub(crate) fn cuts(&self) -> u64 {
         self.cuts
     }
 
     /// The number of pieces held, waiting for their clusters to be complete.
-    pub fn held(&self) -> usize {
+    pub(crate) fn held(&self) -> usize {
         self.front.len()
     }
 
@@ -101,24 +102,7 @@ impl Sweep {
     /// farther along the axis (infinity after the last slab): each cluster its pieces in order,
     /// the clusters in the order of their first pieces. (A cluster cut for its size, see
     /// [`MAX_CLUSTER_VERTICES`], comes where the whole would have.)
-    ///
-    /// ```
-    /// use crease::extract::blocks::Piece;
-    /// use crease::extract::sweep::{Held, Sweep};
-    /// use glam::DVec3;
-    ///
-    /// let x = |x: f64| DVec3::new(x, 0.0, 0.0);
-    /// let held = |id, block, v: Vec<DVec3>, ends| Held { id, block, piece: Piece { v, ends, closed: false } };
-    /// let mut sweep = Sweep::new(0, 0.5, 2.0);
-    /// // A line cut at x = 10 by the first slab's block: it may go on in the next slab.
-    /// let first = vec![held(0, 0, vec![x(1.0), x(2.0)], [None, None]), held(1, 0, vec![x(8.0), x(9.5)], [None, Some(x(10.0))])];
-    /// let done = sweep.add(first, 6.0);
-    /// assert_eq!(done.len(), 1);
-    /// assert_eq!(done[0][0].id, 0);
-    /// let done = sweep.add(vec![held(2, 1, vec![x(10.5), x(12.0)], [Some(x(10.0)), None])], f64::INFINITY);
-    /// assert_eq!(done.iter().map(|c| c.iter().map(|h| h.id).collect()).collect::<Vec<Vec<u64>>>(), vec![vec![1, 2]]);
-    /// ```
-    pub fn add(&mut self, slab: Vec<Held>, beyond: f64) -> Vec<Vec<Held>> {
+    pub(crate) fn add(&mut self, slab: Vec<Held>, beyond: f64) -> Vec<Vec<Held>> {
         let mut items: Vec<(Held, Option<u32>)> =
             std::mem::take(&mut self.front).into_iter().map(|(h, c)| (h, Some(c))).chain(slab.into_iter().map(|h| (h, None))).collect();
         items.sort_by_key(|(h, _)| h.id);
@@ -335,5 +319,23 @@ mod tests {
         let mut ids: Vec<u64> = parts.iter().flatten().map(|h| h.id).collect();
         ids.sort();
         assert_eq!(ids, (0..pieces.len() as u64).collect::<Vec<_>>(), "every piece handed on once");
+    }
+
+    #[test]
+    fn a_cut_line_waits_for_the_next_slab() {
+        use crate::extract::blocks::Piece;
+        use crate::extract::sweep::{Held, Sweep};
+        use glam::DVec3;
+
+        let x = |x: f64| DVec3::new(x, 0.0, 0.0);
+        let held = |id, block, v: Vec<DVec3>, ends| Held { id, block, piece: Piece { v, ends, closed: false } };
+        let mut sweep = Sweep::new(0, 0.5, 2.0);
+        // A line cut at x = 10 by the first slab's block: it may go on in the next slab.
+        let first = vec![held(0, 0, vec![x(1.0), x(2.0)], [None, None]), held(1, 0, vec![x(8.0), x(9.5)], [None, Some(x(10.0))])];
+        let done = sweep.add(first, 6.0);
+        assert_eq!(done.len(), 1);
+        assert_eq!(done[0][0].id, 0);
+        let done = sweep.add(vec![held(2, 1, vec![x(10.5), x(12.0)], [Some(x(10.0)), None])], f64::INFINITY);
+        assert_eq!(done.iter().map(|c| c.iter().map(|h| h.id).collect()).collect::<Vec<Vec<u64>>>(), vec![vec![1, 2]]);
     }
 }

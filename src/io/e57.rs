@@ -45,7 +45,7 @@ fn scanner(c: &e57::PointCloud) -> Option<DVec3> {
 type Decoded = Result<(PointChunk, u64)>;
 
 /// A chunked reader over one E57 file.
-pub struct E57Reader {
+pub(super) struct E57Reader {
     path: PathBuf,
     header: CloudHeader,
     /// Started at the first read.
@@ -60,7 +60,7 @@ pub struct E57Reader {
 
 impl E57Reader {
     /// Opens `path` and reads its XML section (scans, record counts, coordinate metadata).
-    pub fn open(path: &Path) -> Result<E57Reader> {
+    pub(super) fn open(path: &Path) -> Result<E57Reader> {
         let meta = std::fs::metadata(path).map_err(|e| crate::error::io_input(path, e))?;
         if meta.len() == 0 {
             return Err(Error::input(path, "empty file"));
@@ -87,13 +87,13 @@ impl E57Reader {
     }
 
     /// The file's header (bounds are empty: poses move the scans' own bounds).
-    pub fn header(&self) -> &CloudHeader {
+    pub(super) fn header(&self) -> &CloudHeader {
         &self.header
     }
 
     /// Reads up to `max` records into `out` (filtered by class 0, as E57 has no classes);
     /// returns the number of records read (0 at the end).
-    pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
+    pub(super) fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
         if self.at == self.pending.len() {
             self.at = 0;
             self.pending.clear();

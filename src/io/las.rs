@@ -274,7 +274,7 @@ fn cloud_header(path: &Path, p: &Parsed) -> Result<CloudHeader> {
 }
 
 /// Reads only the header of a LAS/LAZ file.
-pub fn read_header(path: &Path) -> Result<CloudHeader> {
+pub(super) fn read_header(path: &Path) -> Result<CloudHeader> {
     let map = map_file(path)?;
     let parsed = parse(path, &map)?;
     cloud_header(path, &parsed)
@@ -363,7 +363,7 @@ fn read_node(path: &Path, reader: &mut CopcFileReader, node: &Node) -> Result<la
 }
 
 /// A chunked reader over one LAS or LAZ file.
-pub struct LasReader {
+pub(super) struct LasReader {
     path: PathBuf,
     header: CloudHeader,
     layout: Layout,
@@ -375,7 +375,7 @@ impl LasReader {
     /// Maps the file and parses its header. With `bounds`, a COPC file is read through its
     /// octree: only the nodes that meet the box are decompressed (the caller still drops the
     /// points outside it).
-    pub fn open(path: &Path, bounds: Option<&Bounds>) -> Result<LasReader> {
+    pub(super) fn open(path: &Path, bounds: Option<&Bounds>) -> Result<LasReader> {
         let map = map_file(path)?;
         let parsed = parse(path, &map)?;
         let header = cloud_header(path, &parsed)?;
@@ -405,12 +405,12 @@ impl LasReader {
     }
 
     /// The file's header.
-    pub fn header(&self) -> &CloudHeader {
+    pub(super) fn header(&self) -> &CloudHeader {
         &self.header
     }
 
     /// Reads up to `max` records into `out` (filtered); returns the number of records read.
-    pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256], keep_withheld: bool) -> Result<usize> {
+    pub(super) fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256], keep_withheld: bool) -> Result<usize> {
         let left = self.header.count - self.next;
         let n = (max as u64).min(left) as usize;
         if n == 0 {

@@ -44,9 +44,9 @@ use std::path::{Path, PathBuf};
 pub const DEFAULT_CHUNK: usize = 1 << 20;
 
 /// ASPRS class for low points (noise).
-pub const CLASS_LOW_NOISE: u8 = 7;
+pub(crate) const CLASS_LOW_NOISE: u8 = 7;
 /// ASPRS class for high noise (LAS 1.4).
-pub const CLASS_HIGH_NOISE: u8 = 18;
+pub(crate) const CLASS_HIGH_NOISE: u8 = 18;
 
 /// Which points a reader hands out (by default: all classes, withheld and noise points dropped).
 #[derive(Clone, Debug, Default)]
@@ -145,7 +145,7 @@ fn unknown_type(path: &Path) -> Error {
 }
 
 /// Guesses the format of `path` from its extension.
-pub fn format_of(path: &Path) -> Option<FileFormat> {
+pub(crate) fn format_of(path: &Path) -> Option<FileFormat> {
     let ext = path.extension()?.to_str()?.to_ascii_lowercase();
     EXTENSIONS.iter().find(|(e, _)| *e == ext).map(|&(_, f)| f)
 }
@@ -182,7 +182,7 @@ impl Inputs {
 }
 
 /// Expands the user's paths: files are kept as given, directories are replaced by the
-/// point files (see [`format_of`]) inside them (`recursive`: in their subdirectories too),
+/// point files (see `format_of`) inside them (`recursive`: in their subdirectories too),
 /// sorted by path. Other entries of a directory are passed over, and named in a warning, as are
 /// its text files that hold no line of coordinates.
 pub fn expand_inputs(paths: &[PathBuf], recursive: bool) -> Result<Inputs> {

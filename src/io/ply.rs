@@ -96,7 +96,7 @@ impl Element {
 }
 
 /// A chunked reader over one PLY file.
-pub struct PlyReader {
+pub(super) struct PlyReader {
     path: PathBuf,
     header: CloudHeader,
     map: Mmap,
@@ -177,7 +177,7 @@ fn precision(types: [Scalar; 3]) -> Precision {
 
 impl PlyReader {
     /// Maps the file and parses its header.
-    pub fn open(path: &Path) -> Result<PlyReader> {
+    pub(super) fn open(path: &Path) -> Result<PlyReader> {
         let file = File::open(path).map_err(|e| io_input(path, e))?;
         let len = file.metadata().map_err(|e| io_input(path, e))?.len();
         if len == 0 {
@@ -245,12 +245,12 @@ impl PlyReader {
     }
 
     /// The file's header (bounds are empty: PLY headers do not hold them).
-    pub fn header(&self) -> &CloudHeader {
+    pub(super) fn header(&self) -> &CloudHeader {
         &self.header
     }
 
     /// Reads up to `max` vertices into `out`; returns how many were read.
-    pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
+    pub(super) fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
         let n = (max as u64).min(self.header.count - self.next) as usize;
         if n == 0 {
             return Ok(0);

@@ -52,7 +52,7 @@ impl TextColumns {
 
 /// Longest line read, in bytes: a point's line holds a few dozen values at most; a longer one
 /// is not a point cloud's (a binary file, or one without line ends, that would be held whole).
-pub const MAX_LINE: usize = 64 * 1024;
+pub(super) const MAX_LINE: usize = 64 * 1024;
 
 /// The UTF-8 byte order mark, which some Windows programs write before the first line.
 const BOM: &[u8] = &[0xEF, 0xBB, 0xBF];
@@ -87,7 +87,7 @@ pub(crate) fn looks_like_points(path: &Path) -> bool {
 }
 
 /// A chunked reader over one text cloud.
-pub struct TextReader {
+pub(super) struct TextReader {
     path: PathBuf,
     header: CloudHeader,
     map: Option<Mmap>,
@@ -100,7 +100,7 @@ pub struct TextReader {
 
 impl TextReader {
     /// Maps the file and finds its layout (`spec`, or detected from its first line).
-    pub fn open(path: &Path, spec: Option<TextColumns>) -> Result<TextReader> {
+    pub(super) fn open(path: &Path, spec: Option<TextColumns>) -> Result<TextReader> {
         let file = File::open(path).map_err(|e| io_input(path, e))?;
         let len = file.metadata().map_err(|e| io_input(path, e))?.len();
         if len == 0 {
@@ -138,12 +138,12 @@ impl TextReader {
     }
 
     /// The file's header (count and bounds unknown until the points are read).
-    pub fn header(&self) -> &CloudHeader {
+    pub(super) fn header(&self) -> &CloudHeader {
         &self.header
     }
 
     /// Reads up to `max` points into `out` (filtered); returns the number of records read.
-    pub fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
+    pub(super) fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
         let Some(map) = &self.map else { return Ok(0) };
         let bytes: &[u8] = map;
         let need = self.cols.xyz.iter().copied().chain(self.cols.class).max().unwrap_or(2) + 1;

@@ -12,7 +12,7 @@ use glam::DVec3;
 use std::path::PathBuf;
 
 /// Where a run's points come from.
-pub enum Input<'a> {
+pub(crate) enum Input<'a> {
     /// Point files, read in order (file index `i` gives the global ids `i << 40 | record`).
     Files(&'a [PathBuf], &'a Filter),
     /// Points held in memory (global ids are their indices).
@@ -21,7 +21,7 @@ pub enum Input<'a> {
 
 /// Where bucketed points go: the tiles, if within the bounds kept (all, if none are set yet),
 /// and the spread.
-pub struct Sink<'a> {
+pub(crate) struct Sink<'a> {
     /// The tiles.
     pub tiles: Bucketer<'a>,
     /// The spread of the points kept.
@@ -36,7 +36,7 @@ pub struct Sink<'a> {
 
 /// Streams every point of `input` into `b`, counting the records read on `bar` (points left
 /// out by the filter count too, as the bar's total is the records the inputs declare).
-pub fn bucket(input: &Input, b: &mut Sink, bar: &Bar, cancel: &Cancel) -> Result<()> {
+pub(crate) fn bucket(input: &Input, b: &mut Sink, bar: &Bar, cancel: &Cancel) -> Result<()> {
     match input {
         Input::Points(points) => {
             for (k, part) in points.chunks(io::DEFAULT_CHUNK).enumerate() {

@@ -5,19 +5,19 @@
 
 /// The smallest memory budget a run takes: room for a tile of a few thousand points and a
 /// batch of curves.
-pub const MIN_MEMORY: u64 = 512 << 10;
+pub(crate) const MIN_MEMORY: u64 = 512 << 10;
 
 /// Bytes of memory a tile point costs while processed (points, tree, per-stage arrays, the
 /// halo share and the prefetched next tile).
-pub const BYTES_PER_POINT: u64 = 600;
+pub(crate) const BYTES_PER_POINT: u64 = 600;
 
 /// Most points a tile is planned to hold, whatever the memory allows: each pass loads its
 /// first tile while the cores wait, and big tiles leave little loading to overlap.
-pub const MAX_TILE_POINTS: u64 = 2_000_000;
+pub(crate) const MAX_TILE_POINTS: u64 = 2_000_000;
 
 /// Fewest points a tile is planned to hold, however small the budget: smaller tiles would be
 /// mostly halo.
-pub const MIN_TILE_POINTS: u64 = 10_000;
+pub(super) const MIN_TILE_POINTS: u64 = 10_000;
 
 /// Bytes of a point in the bucketer's buffers: its position and global id, and its place in
 /// the sort by chunk when the buffer is written.

@@ -19,13 +19,13 @@ const BINS: usize = 4096;
 
 /// Most points a far group may hold, for a cloud of `total` points: a 100,000th of the cloud,
 /// or 64 (fewer than one fit needs), whichever is more. A real part of the scene holds more.
-pub fn far_budget(total: u64) -> u64 {
+pub(crate) fn far_budget(total: u64) -> u64 {
     (total / 100_000).max(64)
 }
 
 /// Per-axis histograms of a cloud over a range: counts and the exact extremes in each bin.
 #[derive(Clone, Debug)]
-pub struct Spread {
+pub(crate) struct Spread {
     min: [f64; 3],
     width: [f64; 3],
     count: Vec<[u64; 3]>,
@@ -35,7 +35,7 @@ pub struct Spread {
 
 impl Spread {
     /// An empty spread over `range` (points outside it count in the end bins).
-    pub fn new(range: &Bounds) -> Spread {
+    pub(crate) fn new(range: &Bounds) -> Spread {
         // (Halved, so that a range from -1e308 to 1e308 does not overflow.)
         let width = std::array::from_fn(|a| (0.5 * range.max[a] - 0.5 * range.min[a]) / BINS as f64);
         Spread { min: range.min, width, count: vec![[0; 3]; BINS], low: vec![[f64::INFINITY; 3]; BINS], high: vec![[f64::NEG_INFINITY; 3]; BINS] }
@@ -51,7 +51,7 @@ impl Spread {
     }
 
     /// Counts `points`.
-    pub fn add(&mut self, points: &[DVec3]) {
+    pub(crate) fn add(&mut self, points: &[DVec3]) {
         for p in points {
             for a in 0..3 {
                 let b = self.bin(p[a], a);
@@ -63,12 +63,12 @@ impl Spread {
     }
 
     /// Points counted.
-    pub fn total(&self) -> u64 {
+    pub(crate) fn total(&self) -> u64 {
         self.count.iter().map(|c| c[0]).sum()
     }
 
     /// The bounds of the cloud without its far points, or `None` if it has none.
-    pub fn far_bounds(&self) -> Option<Bounds> {
+    pub(crate) fn far_bounds(&self) -> Option<Bounds> {
         let total = self.total();
         let budget = far_budget(total);
         if total <= 2 * budget {

@@ -56,53 +56,53 @@ pub struct Manifest {
     /// The job.
     pub job: Job,
     /// Tile grid.
-    pub grid: Grid,
+    pub(crate) grid: Grid,
     /// Points the headers declare.
-    pub declared_points: u64,
+    pub(crate) declared_points: u64,
     /// Diagonal of the inputs' union bounds.
-    pub diag: f64,
+    pub(crate) diag: f64,
     /// Bucketing finished.
-    pub bucketed: bool,
+    pub(crate) bucketed: bool,
     /// Points per tile after filtering.
-    pub tile_points: Vec<u64>,
+    pub(crate) tile_points: Vec<u64>,
     /// Parameters resolved from the statistics pass.
-    pub resolved: Option<Resolved>,
+    pub(crate) resolved: Option<Resolved>,
     /// Outputs written.
-    pub finished: bool,
+    pub(crate) finished: bool,
     /// Where the working data (tiles and per-tile results) is, if not in the run directory
     /// (`--work-dir`; absolute).
     #[serde(default)]
-    pub work_dir: Option<PathBuf>,
+    pub(crate) work_dir: Option<PathBuf>,
     /// The working data was removed once the outputs were written (`--clean`).
     #[serde(default)]
-    pub cleaned: bool,
+    pub(crate) cleaned: bool,
     /// The bounds of the cloud without its far points, once bucketing found some (see
     /// `run/far.rs`): the grid is planned over them and the points outside are left out.
     #[serde(default)]
-    pub kept: Option<crate::points::Bounds>,
+    pub(crate) kept: Option<crate::points::Bounds>,
     /// Points left out as far from all the others.
     #[serde(default)]
-    pub far_points: u64,
+    pub(crate) far_points: u64,
     /// Number of workers sharing the run, if worker 0 planned it (`--worker 0/N`): workers of
     /// another count would share the tiles out otherwise, leaving some to no one.
     #[serde(default)]
-    pub workers: Option<u32>,
+    pub(crate) workers: Option<u32>,
     /// The low corner of the points bucketed (absent from older manifests): where the
     /// curve stage is anchored, rather than at the corner of the bounds the inputs declare.
     #[serde(default)]
-    pub points_min: Option<[f64; 3]>,
+    pub(crate) points_min: Option<[f64; 3]>,
     /// The run directory's layout: [`LAYOUT`] keeps the working data in `work/` (unless
     /// `work_dir` says elsewhere); 0, that of manifests without the field (crease 0.8 and
     /// earlier), keeps it at the top of the run directory, beside the outputs.
     #[serde(default)]
-    pub layout: u32,
+    pub(crate) layout: u32,
 }
 
 /// The layout of the run directories crease makes (see [`Manifest::layout`]).
-pub const LAYOUT: u32 = 1;
+pub(super) const LAYOUT: u32 = 1;
 
 /// The stamp of input file `path`: size, modification time, hash of the first 64 KiB.
-pub fn stamp(path: &Path) -> Result<InputStamp> {
+pub(super) fn stamp(path: &Path) -> Result<InputStamp> {
     use std::io::Read;
     let meta = std::fs::metadata(path).map_err(|e| io_input(path, e))?;
     let mtime_ns = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos() as i128);
@@ -116,7 +116,7 @@ pub fn stamp(path: &Path) -> Result<InputStamp> {
 
 /// One CRS for all inputs, or an error naming the file that disagrees. Files without a CRS
 /// are taken to be in the others' CRS; each such file is named in the returned warnings.
-pub fn common_crs(headers: &[CloudHeader]) -> Result<(Crs, Vec<String>)> {
+pub(crate) fn common_crs(headers: &[CloudHeader]) -> Result<(Crs, Vec<String>)> {
     let known: Vec<&CloudHeader> = headers.iter().filter(|h| !h.crs.is_unknown()).collect();
     let Some(first) = known.first() else {
         return Ok((Crs::default(), vec![]));
@@ -135,7 +135,7 @@ pub fn common_crs(headers: &[CloudHeader]) -> Result<(Crs, Vec<String>)> {
 }
 
 /// Reads the manifest of a workspace, if there is one.
-pub fn read(ws: &Workspace) -> Result<Option<Manifest>> {
+pub(super) fn read(ws: &Workspace) -> Result<Option<Manifest>> {
     match ws.read(NAME)? {
         Some(b) => {
             serde_json::from_slice(&b).map(Some).map_err(|e| Error::Damaged { path: ws.path(NAME), what: "unreadable manifest".into(), source: Some(e.into()) })
@@ -145,7 +145,7 @@ pub fn read(ws: &Workspace) -> Result<Option<Manifest>> {
 }
 
 /// Saves the manifest atomically.
-pub fn save(ws: &Workspace, m: &Manifest) -> Result<()> {
+pub(super) fn save(ws: &Workspace, m: &Manifest) -> Result<()> {
     ws.write_atomic(NAME, serde_json::to_string_pretty(m).expect("manifest serialises").as_bytes())
 }
 
@@ -168,7 +168,7 @@ fn lexically_normal(p: &Path) -> PathBuf {
 }
 
 /// Describes how two jobs differ, for the refusal message.
-pub fn job_difference(old: &Job, new: &Job) -> String {
+pub(super) fn job_difference(old: &Job, new: &Job) -> String {
     if old.version != new.version {
         return format!("crease version changed ({} -> {})", old.version, new.version);
     }

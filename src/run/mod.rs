@@ -3,9 +3,9 @@
 //! ([`extract_cloud`]). The stages' work is in [`crate::extract`]; this module only
 //! orchestrates, one step a file:
 //!
-//! 1. **Plan** ([`plan`]) from the headers (`inputs.rs`): bounds, counts, CRS, a tile grid (2D
+//! 1. **Plan** (`plan`) from the headers (`inputs.rs`): bounds, counts, CRS, a tile grid (2D
 //!    for airborne-like extents, 3D otherwise) sized from `--memory` (a tile holds at most
-//!    [`MAX_TILE_POINTS`]; [`budgets`] says how the budget is shared).
+//!    `MAX_TILE_POINTS`; `budgets` says how the budget is shared).
 //! 2. **Bucket** (`bucket.rs`): one streaming pass over the inputs writes every point once, to
 //!    its tile, zstd-compressed in spatial chunks (16 per tile edge, each headed by its
 //!    bounding box), so that assembling a tile's halo decompresses only the neighbours' border
@@ -61,29 +61,27 @@
 //! buckets, and, once every block is grown, stitches, completes and writes the outputs.
 
 pub(crate) mod bucket;
-pub mod budgets;
+mod budgets;
 mod complete;
 mod curves;
 pub(crate) mod far;
 mod grow;
 mod inputs;
 mod layout;
-pub mod manifest;
+mod manifest;
 pub(crate) mod pass;
-pub mod plan;
+mod plan;
 mod recent;
 pub(crate) mod records;
 mod state;
-pub mod status;
+mod status;
 mod survey;
 mod tile_passes;
 mod types;
 
 pub(crate) use bucket::Input;
-pub use budgets::{BYTES_PER_POINT, MAX_TILE_POINTS, MIN_MEMORY};
 pub use layout::{write_view, OUTPUTS};
-pub use manifest::{common_crs, InputStamp, Job, Manifest};
-pub use plan::tile_size_for;
+pub use manifest::{InputStamp, Job, Manifest, NAME as MANIFEST};
 pub use status::{render_status, status, Status};
 pub use types::{check_threads, Extraction, PassSeconds, ProjectionCost, Report, RunOptions, ShapeCounts, Worker, WorkerStep, MAX_THREADS_PER_CORE};
 
@@ -266,9 +264,9 @@ fn report(run: &mut Run, found: InputFiles, r: Resolved, stage: CurveStage, outs
 /// ```
 /// use crease::extract::Params;
 /// use crease::run::{extract_cloud, RunOptions};
-/// use crease::synth::{sample, shapes, SynthOptions};
+/// use crease::synth::{sample, shape, SynthOptions};
 ///
-/// let cube = shapes::shape("cube", 90.0).unwrap();
+/// let cube = shape("cube", 90.0).unwrap();
 /// let points = sample(&cube, &SynthOptions { n: 60_000, ..Default::default() });
 /// let x = extract_cloud(&points, &Params::default(), &RunOptions::default())?;
 /// assert_eq!(x.curves.len(), 12);

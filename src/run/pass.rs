@@ -19,7 +19,7 @@ use std::time::Instant;
 /// Seconds a tile pass spent loading tiles (reading the store, building the cloud: on the
 /// loader thread, overlapping compute) and computing them.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct PassTime {
+pub(crate) struct PassTime {
     /// Loading.
     pub load: f64,
     /// Computing.
@@ -27,7 +27,7 @@ pub struct PassTime {
 }
 
 /// What a pass needs besides its two steps.
-pub struct PassContext<'a> {
+pub(crate) struct PassContext<'a> {
     /// The run's files.
     pub ws: &'a Workspace,
     /// Progress output.
@@ -41,7 +41,7 @@ pub struct PassContext<'a> {
 /// computes (rayon, inside `compute`) and is written, so reading and building overlap the
 /// fits; the rendezvous channel keeps at most two tiles in memory. Tiles are independent, so
 /// an interrupted pass resumes with the first tile that has no result.
-pub fn tile_pass<T: Send, R: Record>(
+pub(crate) fn tile_pass<T: Send, R: Record>(
     cx: &PassContext,
     name: &str,
     tiles: &[u32],
@@ -96,7 +96,7 @@ pub fn tile_pass<T: Send, R: Record>(
 
 /// How a tile is loaded: its halo, and the thinning of noisy clouds by position key.
 #[derive(Clone, Copy, Debug)]
-pub struct Loading<'a> {
+pub(crate) struct Loading<'a> {
     /// Halo width.
     pub halo: f64,
     /// Share of points kept (1: all).
@@ -124,7 +124,7 @@ pub struct Loading<'a> {
 /// evaluate (the share `evaluate` of the core's, by another draw from the position key). The
 /// averaging runs on the rayon pool: on a cloud thinned to a few percent, loading a tile can
 /// take as long as the fits of the tile before it.
-pub fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoints, Vec<bool>)> {
+pub(crate) fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoints, Vec<bool>)> {
     let core = grid.core(t);
     let (halo, keep) = (l.halo, l.keep);
     let averaged = l.average > 0.0 && keep < 1.0;
@@ -311,7 +311,7 @@ impl Balls {
 
 /// How the residual and projection passes load a tile as a cloud: from `store` over `grid`,
 /// as `loading` says, gridded in cells of side `cell_side`, its queries stopped by `cancel`.
-pub struct CloudLoading<'a> {
+pub(crate) struct CloudLoading<'a> {
     /// The tile store.
     pub store: Store<'a>,
     /// The tile grid.
@@ -327,7 +327,7 @@ pub struct CloudLoading<'a> {
 impl CloudLoading<'_> {
     /// Loads tile `t` with its halo (see [`load`]) and stores it by grid cells, on the rayon
     /// pool if `idle` says that the pool has nothing else to do (the same cloud either way).
-    pub fn load(&self, t: u32, idle: bool) -> Result<(Cloud, Vec<bool>)> {
+    pub(crate) fn load(&self, t: u32, idle: bool) -> Result<(Cloud, Vec<bool>)> {
         let (tp, core) = load(self.store, self.grid, t, &self.loading)?;
         let origin = tile_origin(&tp);
         Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, self.cell_side, idle).cancelled_by(self.cancel), core))

@@ -16,7 +16,7 @@ use std::path::Path;
 /// Tile edge length for a budget: tiles hold about `memory / BYTES_PER_POINT` points (at most
 /// [`MAX_TILE_POINTS`], at least [`MIN_TILE_POINTS`]), assuming the points spread evenly over the footprint (2D) or the
 /// volume (3D) of the bounds.
-pub fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
+pub(crate) fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
     let per_tile = (memory / BYTES_PER_POINT).clamp(MIN_TILE_POINTS, MAX_TILE_POINTS) as f64;
     let ext = DVec3::from(b.max) - DVec3::from(b.min);
     let ext = ext.max(DVec3::splat(1e-9));

@@ -15,7 +15,7 @@ use glam::{DVec3, Vec3};
 use std::path::Path;
 
 /// A tile pass's result for one tile, as stored.
-pub trait Record: Sized {
+pub(crate) trait Record: Sized {
     /// The codec kind.
     const KIND: [u8; 4];
     /// The directory of the pass's results.
@@ -27,12 +27,12 @@ pub trait Record: Sized {
 }
 
 /// The name of tile `t`'s result in directory `dir`.
-pub fn name(dir: &str, t: u32) -> String {
+pub(crate) fn name(dir: &str, t: u32) -> String {
     format!("{dir}/{t}.bin")
 }
 
 /// Stores tile `t`'s result atomically.
-pub fn write<R: Record>(ws: &Workspace, t: u32, rec: &R) -> Result<()> {
+pub(crate) fn write<R: Record>(ws: &Workspace, t: u32, rec: &R) -> Result<()> {
     let mut w = Writer::default();
     rec.encode(&mut w);
     let name = name(R::DIR, t);
@@ -42,7 +42,7 @@ pub fn write<R: Record>(ws: &Workspace, t: u32, rec: &R) -> Result<()> {
 }
 
 /// Reads tile `t`'s result.
-pub fn read<R: Record>(ws: &Workspace, t: u32) -> Result<R> {
+pub(crate) fn read<R: Record>(ws: &Workspace, t: u32) -> Result<R> {
     let name = name(R::DIR, t);
     let path = ws.path(&name);
     let bytes = ws.read(&name)?.ok_or_else(|| Error::damaged(&path, "missing"))?;
@@ -58,7 +58,7 @@ fn decode_all<R: Record>(raw: &[u8], path: &Path) -> Result<R> {
 }
 
 /// The statistics of a tile's sampled points, in global id order.
-pub struct Stats(pub Vec<PointStats>);
+pub(crate) struct Stats(pub Vec<PointStats>);
 
 impl Record for Stats {
     const KIND: [u8; 4] = *b"STAT";
@@ -80,7 +80,7 @@ impl Record for Stats {
 }
 
 /// The residuals of a tile's core points.
-pub struct Residuals(pub TileResiduals);
+pub(crate) struct Residuals(pub TileResiduals);
 
 impl Record for Residuals {
     const KIND: [u8; 4] = *b"RESI";
@@ -108,7 +108,7 @@ impl Record for Residuals {
 }
 
 /// The edge and corner points of a tile's candidates.
-pub struct Edges(pub TileEdges);
+pub(crate) struct Edges(pub TileEdges);
 
 fn dvec3(r: &mut Reader) -> Result<DVec3> {
     Ok(DVec3::new(r.f64()?, r.f64()?, r.f64()?))
@@ -164,7 +164,7 @@ impl Record for Edges {
 
 /// A batch of the run's finished curves, numbered in order: what the curve stage hands the
 /// writers, so that it need not hold every curve at once (see [`super::curves`]).
-pub struct Finished(pub Vec<Polyline>);
+pub(crate) struct Finished(pub Vec<Polyline>);
 
 impl Record for Finished {
     const KIND: [u8; 4] = *b"CURV";
@@ -204,7 +204,7 @@ impl Record for Finished {
 
 /// The smoothed, confirmed edge points of a growth block's core (see
 /// [`crate::extract::blocks`]), by block number rather than tile.
-pub struct Smoothed(pub SmoothedEdges);
+pub(crate) struct Smoothed(pub SmoothedEdges);
 
 impl Record for Smoothed {
     const KIND: [u8; 4] = *b"SMTH";
@@ -234,12 +234,12 @@ impl Record for Smoothed {
 
 /// A tile's edge points at a glance: its number and the bounds of its edge points (relative to
 /// the origin).
-pub type TileBox = (u32, DVec3, DVec3);
+pub(crate) type TileBox = (u32, DVec3, DVec3);
 
 /// What the curve stage's survey of the edge points found (see [`super::survey`]), kept so that
 /// a resumed run, and every worker but the first, need not read every tile's edge points
 /// again. One record, number 0.
-pub struct Survey {
+pub(crate) struct Survey {
     /// Side of the base blocks planned.
     pub side: f64,
     /// The origin of the curve stage's positions, and of the blocks' grid.
@@ -297,7 +297,7 @@ impl Record for Survey {
 /// number, with what they were grown for: the block's box and the origin, so that pieces of
 /// another plan of blocks are never stitched in.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Pieces {
+pub(crate) struct Pieces {
     /// The block's box, relative to the origin.
     pub lo: DVec3,
     /// See `lo`.
@@ -312,7 +312,7 @@ pub struct Pieces {
 
 impl Pieces {
     /// True if these pieces were grown for `block` of a survey with this `origin`.
-    pub fn grown_for(&self, block: &Block, origin: DVec3) -> bool {
+    pub(crate) fn grown_for(&self, block: &Block, origin: DVec3) -> bool {
         (self.lo, self.hi, self.origin) == (block.lo, block.hi, origin)
     }
 }

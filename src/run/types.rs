@@ -54,7 +54,7 @@ pub struct RunOptions {
     /// resumed, re-filtered or viewed over its points, only run again with `force`.
     pub clean: bool,
     /// Side of the curve stage's growth blocks, in polyline steps (see
-    /// [`crate::extract::blocks`]). Smaller blocks cut more polylines for the stitcher to
+    /// `crate::extract::blocks`). Smaller blocks cut more polylines for the stitcher to
     /// join; the default suits every input, and the option is there for tests and
     /// measurements.
     pub block_steps: f64,
@@ -87,7 +87,7 @@ impl Default for RunOptions {
 
 impl RunOptions {
     /// Checks the options, with the message the command line shows for each: a memory budget
-    /// of at least [`MIN_MEMORY`], a positive finite tile size and block side, a confidence
+    /// of at least `MIN_MEMORY`, a positive finite tile size and block side, a confidence
     /// from 0 to 1, a finite length of 0 or more. Every entry point calls it.
     ///
     /// ```
@@ -205,7 +205,7 @@ pub struct Report {
     /// Peak resident memory of this invocation up to the end of the tile passes, bytes.
     pub peak_rss_tiles_bytes: u64,
     /// Peak resident memory during the curve stage (stages 3-5 and the outputs), bytes, as
-    /// sampled every few milliseconds (see [`crate::mem::PeakSampler`]).
+    /// sampled every few milliseconds (see `crate::mem::PeakSampler`).
     pub peak_rss_curves_bytes: u64,
     /// Worker threads.
     pub threads: usize,

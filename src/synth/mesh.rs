@@ -113,7 +113,7 @@ impl Mesh {
 
     /// Edges whose two faces' normals differ by more than `angle_deg` (boundary and
     /// non-manifold edges are not counted), as sorted vertex pairs.
-    pub fn sharp_edges(&self, angle_deg: f64) -> Vec<[u32; 2]> {
+    pub(crate) fn sharp_edges(&self, angle_deg: f64) -> Vec<[u32; 2]> {
         let mut faces: HashMap<[u32; 2], Vec<usize>> = HashMap::new();
         for (t, tri) in self.triangles.iter().enumerate() {
             for k in 0..3 {
@@ -138,7 +138,7 @@ impl Mesh {
 
 /// Chains edges into polylines that break at vertices where other than two edges meet. Loops
 /// repeat their first vertex at the end.
-pub fn chain(edges: &[[u32; 2]]) -> Vec<Vec<u32>> {
+pub(crate) fn chain(edges: &[[u32; 2]]) -> Vec<Vec<u32>> {
     let mut adj: HashMap<u32, Vec<usize>> = HashMap::new();
     for (k, e) in edges.iter().enumerate() {
         adj.entry(e[0]).or_default().push(k);

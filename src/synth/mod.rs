@@ -1,16 +1,20 @@
 //! `crease synth`: point clouds with exactly known feature curves, for tests and benchmarks.
 //!
-//! - [`shapes`]: CAD-like solids and Weber's two-plane wedge, with analytic edges;
-//! - [`mesh`]: area-weighted sampling of a triangle mesh, truth = edges above a dihedral angle;
-//! - [`scene`]: a large outdoor scene streamed to disk with constant memory.
+//! - `shapes`: CAD-like solids and Weber's two-plane wedge, with analytic edges;
+//! - `mesh`: area-weighted sampling of a triangle mesh, truth = edges above a dihedral angle;
+//! - `scene`: a large outdoor scene streamed to disk with constant memory.
 //!
 //! Noise follows Daniels et al.: each point moves by a uniform random vector of length at most
 //! `noise * dB`, with dB the bounding-box diagonal of the clean cloud.
 
-pub mod mesh;
-pub mod scene;
-pub mod shapes;
-pub mod surface;
+pub(crate) mod mesh;
+pub(crate) mod scene;
+pub(crate) mod shapes;
+pub(crate) mod surface;
+
+pub use mesh::{read_mesh, Mesh};
+pub use scene::{write_scene, SceneOptions, EPSG};
+pub use shapes::{shape, Shape, SHAPES};
 
 use crate::curves::{write_obj, Polyline};
 use crate::error::{Error, Result};
@@ -18,7 +22,6 @@ use crate::io::{PointWriter, WriteOptions};
 use crate::points::Bounds;
 use crate::rng::Rng;
 use glam::DVec3;
-use shapes::Shape;
 use std::path::{Path, PathBuf};
 use surface::AreaTable;
 
@@ -111,7 +114,7 @@ pub fn sample(shape: &Shape, opts: &SynthOptions) -> Vec<DVec3> {
 
 /// Applies Daniels' noise (uniform in a ball of radius `radius`) and replaces a share
 /// `outliers` of the points by uniform points in the (clean) bounding box, enlarged by 5 %.
-pub fn perturb(pts: &mut [DVec3], radius: f64, outliers: f64, rng: &mut Rng) {
+pub(crate) fn perturb(pts: &mut [DVec3], radius: f64, outliers: f64, rng: &mut Rng) {
     let b = Bounds::of(pts.iter().copied());
     let r = radius;
     if r > 0.0 {
@@ -149,16 +152,16 @@ pub fn truth_polylines(truth: &[Vec<DVec3>]) -> Vec<Polyline> {
 }
 
 /// A LAS scale fine enough for `diag`-sized data (1e-6 of it, rounded down to a power of ten).
-pub fn scale_for(diag: f64) -> f64 {
+pub(crate) fn scale_for(diag: f64) -> f64 {
     10f64.powf((diag.max(1e-300) * 1e-6).log10().floor())
 }
 
 /// Samples `shape` and writes the cloud to `out` and its truth to [`truth_path`]`(out)`.
 ///
 /// ```no_run
-/// use crease::synth::{shapes, write_sampled, SynthOptions};
+/// use crease::synth::{shape, write_sampled, SynthOptions};
 ///
-/// let fandisk = shapes::shape("fandisk", 90.0).unwrap();
+/// let fandisk = shape("fandisk", 90.0).unwrap();
 /// write_sampled(&fandisk, &SynthOptions { noise: 0.005, ..Default::default() }, std::path::Path::new("fandisk.las"))?;
 /// # Ok::<(), crease::Error>(())
 /// ```

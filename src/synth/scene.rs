@@ -17,13 +17,13 @@ use glam::{DVec2, DVec3};
 use std::path::Path;
 
 /// Block side in metres.
-pub const BLOCK: f64 = 25.0;
+pub(crate) const BLOCK: f64 = 25.0;
 /// Road width in metres.
-pub const ROAD: f64 = 6.0;
+pub(crate) const ROAD: f64 = 6.0;
 /// Curb height in metres.
-pub const CURB: f64 = 0.15;
+pub(crate) const CURB: f64 = 0.15;
 /// World origin of the scene (easting, northing, height) in EPSG:25832.
-pub const ORIGIN: DVec3 = DVec3::new(500_000.0, 5_400_000.0, 100.0);
+pub(crate) const ORIGIN: DVec3 = DVec3::new(500_000.0, 5_400_000.0, 100.0);
 /// EPSG code of the scene's CRS.
 pub const EPSG: u16 = 25832;
 

@@ -7,7 +7,7 @@ use glam::{DVec2, DVec3};
 #[derive(Clone, Debug, Default)]
 pub struct Shape {
     /// Surface pieces, sampled by area.
-    pub surfaces: Vec<Surface>,
+    pub(crate) surfaces: Vec<Surface>,
     /// Ground-truth feature curves (closed curves repeat their first vertex).
     pub truth: Vec<Vec<DVec3>>,
 }
@@ -70,7 +70,7 @@ fn sharp_vertices(l: &[DVec2]) -> Vec<bool> {
 /// A prism: profile loops in the xy plane (first outer, then holes) extruded along z from 0
 /// to `len`. Sharp edges: the extrusion lines of sharp profile vertices and both cap outlines
 /// (split at sharp vertices).
-pub fn prism(loops: &[Vec<DVec2>], len: f64) -> Shape {
+pub(crate) fn prism(loops: &[Vec<DVec2>], len: f64) -> Shape {
     let mut s = Shape::default();
     let lift = |p: DVec2, z: f64| DVec3::new(p.x, p.y, z);
     for cap_z in [0.0, len] {

@@ -6,7 +6,7 @@ use glam::{DVec2, DVec3};
 
 /// A planar frame: world = origin + u * x + v * y.
 #[derive(Clone, Copy, Debug)]
-pub struct Frame {
+pub(crate) struct Frame {
     /// Origin.
     pub origin: DVec3,
     /// First in-plane axis (unit).
@@ -17,14 +17,14 @@ pub struct Frame {
 
 impl Frame {
     /// Maps plane coordinates to world.
-    pub fn at(&self, p: DVec2) -> DVec3 {
+    pub(crate) fn at(&self, p: DVec2) -> DVec3 {
         self.origin + self.x * p.x + self.y * p.y
     }
 }
 
 /// A surface piece.
 #[derive(Clone, Debug)]
-pub enum Surface {
+pub(crate) enum Surface {
     /// A triangle.
     Triangle([DVec3; 3]),
     /// A planar region bounded by loops (even-odd rule, so inner loops are holes).
@@ -75,7 +75,7 @@ fn polygon_area(loops: &[Vec<DVec2>]) -> f64 {
 }
 
 /// Even-odd point-in-polygon test over all loops.
-pub fn inside(loops: &[Vec<DVec2>], p: DVec2) -> bool {
+pub(crate) fn inside(loops: &[Vec<DVec2>], p: DVec2) -> bool {
     let mut c = false;
     for l in loops {
         let n = l.len();
@@ -91,7 +91,7 @@ pub fn inside(loops: &[Vec<DVec2>], p: DVec2) -> bool {
 
 impl Surface {
     /// Area of the piece.
-    pub fn area(&self) -> f64 {
+    pub(crate) fn area(&self) -> f64 {
         match self {
             Surface::Triangle([a, b, c]) => (*b - *a).cross(*c - *a).length() / 2.0,
             Surface::Polygon { loops, .. } => polygon_area(loops),
@@ -114,7 +114,7 @@ impl Surface {
     }
 
     /// One point uniformly distributed over the piece.
-    pub fn sample(&self, rng: &mut Rng) -> DVec3 {
+    pub(crate) fn sample(&self, rng: &mut Rng) -> DVec3 {
         match self {
             Surface::Triangle([a, b, c]) => {
                 let (mut u, mut v) = (rng.f64(), rng.f64());
@@ -153,13 +153,13 @@ fn grad(f: fn(DVec2) -> f64, p: DVec2, h: f64) -> DVec2 {
 }
 
 /// Picks surfaces by area: cumulative area table for sampling.
-pub struct AreaTable {
+pub(crate) struct AreaTable {
     cum: Vec<f64>,
 }
 
 impl AreaTable {
     /// Builds the table for `surfaces`.
-    pub fn new(surfaces: &[Surface]) -> AreaTable {
+    pub(crate) fn new(surfaces: &[Surface]) -> AreaTable {
         let mut s = 0.0;
         let cum = surfaces
             .iter()
@@ -172,12 +172,12 @@ impl AreaTable {
     }
 
     /// Total area.
-    pub fn total(&self) -> f64 {
+    pub(crate) fn total(&self) -> f64 {
         *self.cum.last().unwrap_or(&0.0)
     }
 
     /// Index of a surface drawn with probability proportional to its area.
-    pub fn pick(&self, rng: &mut Rng) -> usize {
+    pub(crate) fn pick(&self, rng: &mut Rng) -> usize {
         let t = rng.f64() * self.total();
         self.cum.partition_point(|&c| c <= t).min(self.cum.len() - 1)
     }

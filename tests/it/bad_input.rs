@@ -387,7 +387,7 @@ fn warnings_name_what_was_passed_over_or_assumed() {
     let scans = d.path().join("scans");
     std::fs::create_dir_all(scans.join("sub")).unwrap();
     std::fs::write(scans.join("notes.md"), "survey notes").unwrap();
-    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
     let write = |path: &Path, pts: &[glam::DVec3], epsg: Option<u16>| {
         let mut w = PointWriter::create(path, &WriteOptions { scale: 1e-4, offset: glam::DVec3::ZERO, epsg }).unwrap();
         w.write(pts, &vec![0; pts.len()]).unwrap();

@@ -13,7 +13,7 @@ const WKT: &str = r#"PROJCS["ETRS89 / UTM zone 32N",GEOGCS["ETRS89",DATUM["Europ
 
 /// A LAS 1.4 cube whose WKT is in its second EVLR (a COPC file puts its hierarchy first).
 fn cube_with_wkt_in_a_later_evlr(path: &Path) {
-    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
     let mut b = las::Builder::from((1, 4));
     b.point_format = las::point::Format::new(6).unwrap();
     b.transforms = las::Vector {

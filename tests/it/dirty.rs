@@ -19,7 +19,7 @@ fn write_ply(path: &Path, points: &[DVec3]) {
 /// A 20 k-point cube, written to `dir/cube.ply` and extracted into `dir/run_plain`, which must
 /// give its 12 curves: the points and the curves (OBJ bytes).
 fn plain_cube(dir: &Path) -> (Vec<DVec3>, Vec<u8>) {
-    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
     let plain = dir.join("cube.ply");
     write_ply(&plain, &cube);
     let curves = extract(&plain, &dir.join("run_plain"));
@@ -114,7 +114,7 @@ fn notes_among_the_scans_are_passed_over() {
     let d = tempfile::tempdir().unwrap();
     let scans = d.path().join("scans");
     std::fs::create_dir(&scans).unwrap();
-    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
     let (half, rest) = cube.split_at(10_000);
     write_ply(&scans.join("a.ply"), half);
     let pts: String = std::iter::once(format!("{}\n", rest.len())).chain(rest.iter().map(|p| format!("{} {} {}\n", p.x, p.y, p.z))).collect();

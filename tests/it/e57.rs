@@ -57,7 +57,7 @@ fn write_two_scans(path: &Path, cube: &[DVec3]) {
 #[test]
 fn an_e57_gives_the_curves_of_the_same_points_in_ply() {
     let d = tempfile::tempdir().unwrap();
-    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 30_000, ..Default::default() });
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 30_000, ..Default::default() });
     let e57 = d.path().join("cube.e57");
     write_two_scans(&e57, &cube);
     let ply = d.path().join("cube.ply");
@@ -121,7 +121,7 @@ fn coordinate_metadata_names_the_crs_when_it_is_a_code_or_a_wkt() {
 #[test]
 fn an_e57_scan_pose_tells_convex_from_concave() {
     let d = tempfile::tempdir().unwrap();
-    let step = crease::synth::sample(&crease::synth::shapes::shape("step", 90.0).unwrap(), &crease::synth::SynthOptions { n: 60_000, ..Default::default() });
+    let step = crease::synth::sample(&crease::synth::shape("step", 90.0).unwrap(), &crease::synth::SynthOptions { n: 60_000, ..Default::default() });
     let at = DVec3::new(3.0, 3.0, 3.0);
     let e57 = d.path().join("step.e57");
     let mut w = E57Writer::from_file(&e57, "crease-test-file").unwrap();

@@ -13,7 +13,7 @@ fn extract(points: &[glam::DVec3], params: &Params) -> Extraction {
     extract_cloud(points, params, &RunOptions::default()).expect("extraction")
 }
 use crease::io::{Filter, PointReader};
-use crease::synth::{self, shapes::shape, Sampling, SynthOptions};
+use crease::synth::{self, shape, Sampling, SynthOptions};
 use glam::DVec3;
 use std::path::{Path, PathBuf};
 
@@ -260,8 +260,8 @@ fn a_file_and_its_points_in_memory_give_the_same_curves() {
 fn clutter_scene_keeps_the_designed_edges_and_nothing_in_the_tree() {
     let d = tempfile::tempdir().unwrap();
     let las = d.path().join("block.las");
-    let opts = synth::scene::SceneOptions { n: 400_000, noise: 0.01, seed: 3, clutter: true };
-    synth::scene::write_scene(&opts, &las).unwrap();
+    let opts = synth::SceneOptions { n: 400_000, noise: 0.01, seed: 3, clutter: true };
+    synth::write_scene(&opts, &las).unwrap();
     let pts = PointReader::open(&las, &Filter::default()).unwrap().read_all().unwrap();
     assert!(pts.class.contains(&5), "the block has a tree");
     let truth = read_obj(&synth::truth_path(&las)).unwrap();

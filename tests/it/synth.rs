@@ -4,7 +4,7 @@ use crate::common;
 
 use crease::curves::read_obj;
 use crease::io::{read_header, Filter, PointReader};
-use crease::synth::{self, shapes::shape, Sampling, SynthOptions};
+use crease::synth::{self, shape, Sampling, SynthOptions};
 use glam::DVec3;
 use std::collections::HashSet;
 
@@ -132,7 +132,7 @@ fn mesh_truth_is_exactly_the_sharp_edges() {
 
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("anchor.las");
-    let mesh = synth::mesh::read_mesh(&off).unwrap();
+    let mesh = synth::read_mesh(&off).unwrap();
     synth::write_sampled(&mesh.to_shape(30.0), &opts(10_000, 0.0, 1), &out).unwrap();
     let truth = read_obj(&synth::truth_path(&out)).unwrap();
     // Map truth vertices back to mesh vertex ids by exact position.
@@ -154,11 +154,11 @@ fn mesh_truth_is_exactly_the_sharp_edges() {
 fn scene_is_exact_in_count_and_carries_crs() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("scene.las");
-    let n = synth::scene::write_scene(&synth::scene::SceneOptions { n: 300_000, noise: 0.005, seed: 4, clutter: false }, &out).unwrap();
+    let n = synth::write_scene(&synth::SceneOptions { n: 300_000, noise: 0.005, seed: 4, clutter: false }, &out).unwrap();
     assert_eq!(n, 300_000);
     let h = read_header(&out).unwrap();
     assert_eq!(h.count, 300_000);
-    assert_eq!(h.crs.epsg, Some(u32::from(synth::scene::EPSG)));
+    assert_eq!(h.crs.epsg, Some(u32::from(synth::EPSG)));
     let pts = PointReader::open(&out, &Filter::default()).unwrap().read_all().unwrap();
     assert!(pts.class.contains(&6) && pts.class.contains(&2));
     let truth = read_obj(&synth::truth_path(&out)).unwrap();

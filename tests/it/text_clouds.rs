@@ -13,7 +13,7 @@ fn crease(args: &[&str]) -> (i32, String) {
 #[test]
 fn text_clouds_give_the_curves_of_the_same_points_in_ply() {
     let d = tempfile::tempdir().unwrap();
-    let cube = crease::synth::sample(&crease::synth::shapes::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
     let ply = d.path().join("cube.ply");
     let mut w = crease::io::PointWriter::create(&ply, &crease::io::WriteOptions { scale: 1e-6, offset: DVec3::ZERO, epsg: None }).unwrap();
     w.write(&cube, &vec![0; cube.len()]).unwrap();

@@ -86,7 +86,7 @@ fn a_share_of_the_points_evaluated_is_the_same_in_any_tiling() {
 /// halo's points from the records of the tiles whose cores hold them).
 #[test]
 fn cells_and_patches_search_the_same_in_any_tiling() {
-    use crease::extract::params::Model;
+    use crease::extract::Model;
     let d = tempfile::tempdir().unwrap();
     let input = vec![fixture("cube_noise005.las")];
     let balls = run_extract(&input, &d.path().join("balls"), &Params::default(), &Filter::default(), &opts(Some(10.0))).unwrap();
@@ -130,7 +130,7 @@ fn same_in_smaller_tiles(dir: &Path, input: &[PathBuf], params: &Params, one: &c
 /// same parameters, tau to the bit and the same curves.
 #[test]
 fn kept_points_averaged_are_the_same_in_any_tiling() {
-    use crease::synth::{self, shapes::shape, Sampling, SynthOptions};
+    use crease::synth::{self, shape, Sampling, SynthOptions};
     let d = tempfile::tempdir().unwrap();
     let las = d.path().join("cube.las");
     let o = SynthOptions { n: 100_000, noise: 0.02, noise_spacing: 0.0, outliers: 0.0, sampling: Sampling::Uniform, seed: 7 };

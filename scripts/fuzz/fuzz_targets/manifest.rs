@@ -7,7 +7,7 @@
 
 use crease::extract::Params;
 use crease::io::{Filter, PointWriter, WriteOptions};
-use crease::run::{manifest, run_extract, RunOptions};
+use crease::run::{run_extract, Job, Manifest, RunOptions, MANIFEST};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -15,7 +15,7 @@ struct Setup {
     input: PathBuf,
     pristine: PathBuf,
     work: PathBuf,
-    job: manifest::Job,
+    job: Job,
     opts: RunOptions,
 }
 
@@ -38,7 +38,7 @@ fn setup() -> &'static Setup {
         let base = std::env::temp_dir().join(format!("crease-fuzz-manifest-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&base);
         std::fs::create_dir_all(&base).unwrap();
-        let shape = crease::synth::shapes::shape("cube", 90.0).unwrap();
+        let shape = crease::synth::shape("cube", 90.0).unwrap();
         let pts = crease::synth::sample(&shape, &crease::synth::SynthOptions { n: 4000, ..Default::default() });
         let input = base.join("cube.ply");
         let mut w = PointWriter::create(&input, &WriteOptions { scale: 1e-6, offset: Default::default(), epsg: None }).unwrap();
@@ -48,7 +48,7 @@ fn setup() -> &'static Setup {
         let opts = RunOptions { tile_size: Some(0.45), ..Default::default() };
         let pristine = base.join("pristine");
         run_extract(&[input.clone()], &pristine, &Params::default(), &Filter::keep_all(), &opts).expect("the set-up run works");
-        let held: manifest::Manifest = serde_json::from_slice(&std::fs::read(pristine.join(manifest::NAME)).unwrap()).unwrap();
+        let held: Manifest = serde_json::from_slice(&std::fs::read(pristine.join(MANIFEST)).unwrap()).unwrap();
         let job = held.job;
         Setup { input, pristine, work: base.join("work"), job, opts }
     })
@@ -58,13 +58,13 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let s = setup();
     let _ = std::fs::remove_dir_all(&s.work);
     copy_dir(&s.pristine, &s.work);
-    let bytes = match serde_json::from_slice::<manifest::Manifest>(data) {
+    let bytes = match serde_json::from_slice::<Manifest>(data) {
         Ok(mut m) => {
             m.job = s.job.clone();
             serde_json::to_vec(&m).unwrap()
         }
         Err(_) => data.to_vec(),
     };
-    std::fs::write(s.work.join(manifest::NAME), bytes).unwrap();
+    std::fs::write(s.work.join(MANIFEST), bytes).unwrap();
     let _ = run_extract(&[s.input.clone()], &s.work, &Params::default(), &Filter::keep_all(), &s.opts);
 });
