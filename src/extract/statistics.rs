@@ -412,7 +412,7 @@ fn near(xyz: &[DVec3], centre: &[bool], radius: f64) -> Option<Vec<usize>> {
 
 #[cfg(test)]
 mod tests {
-    use super::{median, near, point_stats, NOISE_BALL};
+    use super::{median, near, point_stats, tile_statistics, StatsTile, NOISE_BALL};
     use crate::extract::neighbourhood::{Cloud, Thinned};
     use glam::DVec3;
 
@@ -505,5 +505,37 @@ mod tests {
         // Most of the points near: keep them all.
         let all: Vec<bool> = (0..pts.len()).map(|i| i % 50 == 0).collect();
         assert_eq!(near(&pts, &all, radius), None);
+    }
+
+    /// A cancel while a tile's samples are computed ends the tile within a small share of its
+    /// time (the samples check the flag; the tile took as long as all of them before): here a
+    /// noisy plane whose every statistics sample lies in one tile.
+    #[test]
+    fn a_cancel_during_a_tiles_statistics_returns_promptly() {
+        let n = 300_000;
+        let mut rng = crate::rng::Rng::stream(7, 0);
+        let xyz: Vec<DVec3> = (0..n).map(|_| DVec3::new(rng.f64(), rng.f64(), 0.0) + rng.in_ball(0.01)).collect();
+        let tp = crate::points::TilePoints { gid: (0..n as u64).collect(), xyz };
+        let core = crate::points::Bounds { min: [-1.0; 3], max: [2.0; 3] };
+        let cancel = crate::cancel::Cancel::default();
+        let tile = StatsTile { core, halo: 0.05, key_quantum: 1e-9, total: n as u64, seed: 1, cancel: &cancel };
+        let first = || (tp.clone(), vec![true; n]);
+        let t = std::time::Instant::now();
+        let (stats, _) = tile_statistics(first(), 0.05, &tile, |_| Ok(first())).unwrap();
+        let whole = t.elapsed();
+        assert!(stats.len() > 10_000, "{} samples", stats.len());
+        let at = whole / 4;
+        let took = std::thread::scope(|s| {
+            s.spawn(|| {
+                std::thread::sleep(at);
+                cancel.set();
+            });
+            let t = std::time::Instant::now();
+            let out = tile_statistics(first(), 0.05, &tile, |_| Ok(first()));
+            assert!(matches!(out, Err(crate::Error::Interrupted)), "not interrupted: {:?}", out.map(|s| s.0.len()));
+            t.elapsed()
+        });
+        eprintln!("whole tile {whole:?}, cancelled at {at:?}, returned after {took:?}");
+        assert!(took < at + whole / 4, "cancelled at {at:?}, returned after {took:?} (the whole tile takes {whole:?})");
     }
 }
