@@ -43,7 +43,9 @@ impl Run<'_> {
         let r = done!(self.statistics(params)?);
         // (All points at one position, or too few apart: every length of the method is zero.)
         if !(r.kappa > 0.0 && r.kappa.is_finite() && r.fit_radius > 0.0 && r.rmls_radius > 0.0) {
-            return Err(Error::input(first_input, format!("the points have no spread (spacing {}): nothing to extract", r.kappa)));
+            let copies = self.manifest.duplicates.iter().sum::<u64>();
+            let copies = if copies > 0 { format!("; {copies} of the {total} points are copies of others") } else { String::new() };
+            return Err(Error::input(first_input, format!("the points have no spread (spacing {}{copies}): nothing to extract", r.kappa)));
         }
         self.tau = done!(self.residuals(&r, params)?);
         done!(self.projection(&r)?);
