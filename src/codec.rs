@@ -18,7 +18,7 @@ use std::path::Path;
 /// The four bytes every frame starts with.
 pub(crate) const MAGIC: [u8; 4] = *b"CRSE";
 /// Layout version of every kind; raised when any layout changes.
-pub(crate) const FORMAT: u16 = 2;
+pub(crate) const FORMAT: u16 = 3;
 /// Bytes of a frame header.
 pub(crate) const HEADER: usize = 32;
 

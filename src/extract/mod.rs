@@ -66,6 +66,14 @@ pub struct Counts {
     /// bounds; see the run's far-point rule).
     #[serde(default)]
     pub far_points: u64,
+    /// Points dropped as copies at the very position of another (overlapping scans, tiles
+    /// merged twice): counted in `points`, left out of the statistics and the fits.
+    #[serde(default)]
+    pub exact_duplicates: u64,
+    /// Points dropped as near copies of another (within a small share of the spacing, see
+    /// [`statistics::NEAR_DUPLICATE`]): counted in `points`, left out as the exact ones are.
+    #[serde(default)]
+    pub near_duplicates: u64,
     /// Points at which stages 1-2 were evaluated (fewer than the input where a noisy cloud is
     /// thinned, see [`Resolved::keep`]).
     #[serde(default)]

@@ -128,6 +128,15 @@ pub struct Resolved {
     /// How stage 2 searches for surfaces.
     #[serde(default)]
     pub model: Model,
+    /// Radius within which near duplicates are collapsed as the tiles are loaded (0: exact
+    /// copies only; see [`super::statistics::near_duplicate_radius`]). Written only where the
+    /// cloud has them, so that a clean cloud's files read as before.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub near: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// Default largest turn while growing, degrees.
@@ -312,6 +321,7 @@ impl Params {
             linearity: 0.7,
             seed: self.seed.unwrap_or(DEFAULT_SEED),
             model: self.model.unwrap_or_default(),
+            near: 0.0,
         }
     }
 }
@@ -363,7 +373,7 @@ mod tests {
     use super::*;
 
     fn stats(spacing: f64, noise: f64, density: f64) -> Vec<PointStats> {
-        vec![PointStats { spacing, noise, density }; 5]
+        vec![PointStats { spacing, noise, density, twin: false }; 5]
     }
 
     /// Evaluation is thinned only when asked, and only to what a fit's disk holds: a clean

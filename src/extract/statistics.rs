@@ -40,6 +40,35 @@ pub(crate) struct PointStats {
     pub noise: f64,
     /// Points per unit area within 16 spacings.
     pub density: f64,
+    /// True if another point lies within [`NEAR_DUPLICATE`] of this spacing: a near duplicate
+    /// (see [`near_duplicate_radius`]).
+    pub twin: bool,
+}
+
+/// Points closer than this share of the spacing to another are near duplicates (copies that
+/// went through a transform or another scale): two independent samples of a surface come
+/// that close about once in 1.4 M points (a share of ln 2 times its square), so collapsing
+/// them leaves clean scans as they were, while rounded copies lie far closer than that.
+pub(crate) const NEAR_DUPLICATE: f64 = 1e-3;
+
+/// Share of the statistics samples with a near duplicate (see [`PointStats::twin`]) above
+/// which the cloud's near duplicates are collapsed: a thousand times what independent samples
+/// give (see [`NEAR_DUPLICATE`]), and a tenth of a percent of the samples is enough to bias
+/// the spacing measured from the 16th neighbour.
+pub(crate) const TWIN_SHARE: f64 = 1e-3;
+
+/// The radius within which near duplicates are collapsed, from statistics measured with them
+/// in: [`NEAR_DUPLICATE`] times the median spacing, or None if too few samples have a twin.
+/// (The spacing measured over copies is short by up to the square root of their count, so
+/// the radius is too; copies still lie far within it.)
+pub(crate) fn near_duplicate_radius(stats: &[PointStats]) -> Option<f64> {
+    let twins = stats.iter().filter(|s| s.twin).count();
+    if twins < 3 || (twins as f64) < TWIN_SHARE * stats.len() as f64 {
+        return None;
+    }
+    let mut k: Vec<f64> = stats.iter().map(|s| s.spacing).collect();
+    let h = NEAR_DUPLICATE * median(&mut k);
+    (h > 0.0 && h.is_finite()).then_some(h)
 }
 
 /// True if the point with key `key` is one of the statistics sample in a cloud of `total`
@@ -78,6 +107,8 @@ pub(crate) fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t T
     let q = cloud.at(i);
     let mut d2: Vec<f64> = buf.iter().map(|b| cloud.at(b.0 as usize).distance_squared(q)).collect();
     let rk = d2.select_nth_unstable_by(K, f64::total_cmp).1.sqrt();
+    // (Exact copies were dropped as the tile was loaded: the point itself is the one at 0.)
+    let nearest = buf.iter().filter(|b| b.0 as usize != i).map(|b| cloud.at(b.0 as usize).distance_squared(q)).fold(f64::INFINITY, f64::min);
     // The K nearest neighbours (and the point) seed the surface that the noise is measured about.
     // (Points tied with the K-th, common on quantised coordinates, all belong: compared with a
     // margin far above the rounding of the tile's local coordinates, so that each tile takes
@@ -118,7 +149,8 @@ pub(crate) fn point_stats<'t, 'c: 't>(cloud: &Cloud, thinned: impl Fn() -> &'t T
         }
         (centre, radius) = (foot, NOISE_BALL * noise);
     }
-    Some((PointStats { spacing: kappa, noise, density }, reach))
+    let twin = nearest < (NEAR_DUPLICATE * kappa).powi(2);
+    Some((PointStats { spacing: kappa, noise, density, twin }, reach))
 }
 
 /// The RMS residual of the points `buf` about the surface that `q` lies on, and the foot of
@@ -205,9 +237,9 @@ pub(crate) fn quantile(v: &mut [f64], q: f64) -> f64 {
 }
 
 /// A tile as the statistics pass sees it: the core box, the first halo, the position key
-/// quantum, the cloud's point count, and the seed of the sampling.
+/// quantum, the cloud's point count, the seed of the sampling, and what stops it.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct StatsTile {
+pub(crate) struct StatsTile<'a> {
     /// The tile's core.
     pub core: Bounds,
     /// The halo the tile was first loaded with.
@@ -218,6 +250,8 @@ pub(crate) struct StatsTile {
     pub total: u64,
     /// Sampling seed.
     pub seed: u64,
+    /// Stops the tile's samples part way (a tile of a dense cloud takes seconds).
+    pub cancel: &'a crate::cancel::Cancel,
 }
 
 /// Statistics of the sampled points in a tile's core, in global id order, given the tile
@@ -249,6 +283,8 @@ pub(crate) fn tile_statistics(
     let mut done: Vec<(u64, PointStats)> = Vec::new();
     loop {
         let round = sample_round(&tp, &is_core, todo.as_deref(), reach, tile, halo, cap);
+        // (A cancelled round skipped its samples: what it says is not to be used.)
+        tile.cancel.check()?;
         done.extend(round.done);
         if round.again.is_empty() {
             break;
@@ -314,7 +350,8 @@ fn sample_round(tp: &TilePoints, is_core: &[bool], todo: Option<&[u64]>, reach: 
     // in it could otherwise pick up another sample that waits for the same cell.)
     let thinned = std::sync::OnceLock::new();
     let lazy = || thinned.get_or_init(|| Thinned::new(&cloud));
-    let stats: Vec<Option<(PointStats, f64)>> = sample.par_iter().map_init(Vec::new, |buf, &i| point_stats(&cloud, lazy, i, buf)).collect();
+    let stats: Vec<Option<(PointStats, f64)>> =
+        sample.par_iter().map_init(Vec::new, |buf, &i| if tile.cancel.is_set() { None } else { point_stats(&cloud, lazy, i, buf) }).collect();
     let mut round = Round { done: Vec::new(), again: Vec::new(), need: 0.0, wider_halo: false };
     for (&i, s) in sample.iter().zip(stats) {
         // The widest ball the statistics read (the 16-spacing ball, or the noise's), with the
@@ -375,7 +412,7 @@ fn near(xyz: &[DVec3], centre: &[bool], radius: f64) -> Option<Vec<usize>> {
 
 #[cfg(test)]
 mod tests {
-    use super::{median, near, point_stats, NOISE_BALL};
+    use super::{median, near, point_stats, tile_statistics, StatsTile, NOISE_BALL};
     use crate::extract::neighbourhood::{Cloud, Thinned};
     use glam::DVec3;
 
@@ -468,5 +505,37 @@ mod tests {
         // Most of the points near: keep them all.
         let all: Vec<bool> = (0..pts.len()).map(|i| i % 50 == 0).collect();
         assert_eq!(near(&pts, &all, radius), None);
+    }
+
+    /// A cancel while a tile's samples are computed ends the tile within a small share of its
+    /// time (the samples check the flag; the tile took as long as all of them before): here a
+    /// noisy plane whose every statistics sample lies in one tile.
+    #[test]
+    fn a_cancel_during_a_tiles_statistics_returns_promptly() {
+        let n = 300_000;
+        let mut rng = crate::rng::Rng::stream(7, 0);
+        let xyz: Vec<DVec3> = (0..n).map(|_| DVec3::new(rng.f64(), rng.f64(), 0.0) + rng.in_ball(0.01)).collect();
+        let tp = crate::points::TilePoints { gid: (0..n as u64).collect(), xyz };
+        let core = crate::points::Bounds { min: [-1.0; 3], max: [2.0; 3] };
+        let cancel = crate::cancel::Cancel::default();
+        let tile = StatsTile { core, halo: 0.05, key_quantum: 1e-9, total: n as u64, seed: 1, cancel: &cancel };
+        let first = || (tp.clone(), vec![true; n]);
+        let t = std::time::Instant::now();
+        let (stats, _) = tile_statistics(first(), 0.05, &tile, |_| Ok(first())).unwrap();
+        let whole = t.elapsed();
+        assert!(stats.len() > 10_000, "{} samples", stats.len());
+        let at = whole / 4;
+        let took = std::thread::scope(|s| {
+            s.spawn(|| {
+                std::thread::sleep(at);
+                cancel.set();
+            });
+            let t = std::time::Instant::now();
+            let out = tile_statistics(first(), 0.05, &tile, |_| Ok(first()));
+            assert!(matches!(out, Err(crate::Error::Interrupted)), "not interrupted: {:?}", out.map(|s| s.0.len()));
+            t.elapsed()
+        });
+        eprintln!("whole tile {whole:?}, cancelled at {at:?}, returned after {took:?}");
+        assert!(took < at + whole / 4, "cancelled at {at:?}, returned after {took:?} (the whole tile takes {whole:?})");
     }
 }

@@ -52,6 +52,8 @@ impl Run<'_> {
         let mut counts = Counts {
             points: self.manifest.tile_points.iter().sum(),
             far_points: self.manifest.far_points,
+            exact_duplicates: self.manifest.duplicates[0],
+            near_duplicates: self.manifest.duplicates[1],
             evaluated: self.evaluated,
             corners: grouped.len() as u64,
             blocks: blocks.list.len() as u64,

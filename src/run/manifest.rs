@@ -83,6 +83,14 @@ pub struct Manifest {
     /// Points left out as far from all the others.
     #[serde(default)]
     pub(crate) far_points: u64,
+    /// The radius within which near duplicates are collapsed, once the first statistics pass
+    /// found them (0: none found, or not measured yet; see
+    /// [`near_duplicate_radius`](crate::extract::statistics::near_duplicate_radius)).
+    #[serde(default)]
+    pub(crate) near_radius: f64,
+    /// Points dropped as exact and as near copies of others (counted by the statistics pass).
+    #[serde(default)]
+    pub(crate) duplicates: [u64; 2],
     /// Number of workers sharing the run, if worker 0 planned it (`--worker 0/N`): workers of
     /// another count would share the tiles out otherwise, leaving some to no one.
     #[serde(default)]

@@ -116,6 +116,18 @@ pub(crate) struct Loading<'a> {
     /// Share of the points the averaging takes (see
     /// [`Resolved::average_share`](crate::extract::Resolved::average_share)).
     pub average_share: f64,
+    /// Radius within which near duplicates are collapsed (0: exact copies only; see
+    /// [`Resolved::near`](crate::extract::Resolved::near)).
+    pub near: f64,
+}
+
+/// How many of a tile's own points were dropped as copies of others as it was loaded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Dropped {
+    /// At the very position of another.
+    pub exact: u64,
+    /// Within the near-duplicate radius of another (see [`Loading::near`]).
+    pub near: u64,
 }
 
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by position key, each
@@ -125,11 +137,33 @@ pub(crate) struct Loading<'a> {
 /// averaging runs on the rayon pool: on a cloud thinned to a few percent, loading a tile can
 /// take as long as the fits of the tile before it.
 pub(crate) fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(TilePoints, Vec<bool>)> {
+    load_counted(store, grid, t, l).map(|(tile, _)| tile)
+}
+
+/// As [`load`], also counting the tile's own points dropped as copies.
+pub(crate) fn load_counted(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<((TilePoints, Vec<bool>), Dropped)> {
     let core = grid.core(t);
     let (halo, keep) = (l.halo, l.keep);
     let averaged = l.average > 0.0 && keep < 1.0;
     // The points within `average` of a point of the halo are read too.
     let reach = if averaged { halo + l.average } else { halo };
+    let (mut tp, own) = read_tile(store, grid, t, l, reach)?;
+    let before = own.len() as u64;
+    let own = drop_duplicates(&mut tp, own);
+    let exact = before - own.len() as u64;
+    let own = if l.near > 0.0 { drop_near(&mut tp, own, l.near, |p| within(&core, reach, p)) } else { own };
+    let dropped = Dropped { exact, near: before - exact - own.len() as u64 };
+    Ok((flagged(tp, own, &core, l), dropped))
+}
+
+/// Reads tile `t`'s own points and those of the tiles around within `reach` of its core
+/// (and the near-duplicate radius further: whether a point is a near copy depends on the
+/// points around it), as `l` thins them. Returns where the own points are.
+fn read_tile(store: Store, grid: &Grid, t: u32, l: &Loading, reach: f64) -> Result<(TilePoints, std::ops::Range<usize>)> {
+    let core = grid.core(t);
+    let keep = l.keep;
+    let averaged = l.average > 0.0 && keep < 1.0;
+    let reach = reach + l.near;
     let kept = |key| keep >= 1.0 || keep_point(key, keep, l.seed);
     // (A key of its own, so that the points averaged over do not follow those kept.)
     let member = |key: u64| averaged && (l.average_share >= 1.0 || keep_point(key ^ salts::AVERAGED, l.average_share, l.seed));
@@ -156,17 +190,26 @@ pub(crate) fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(Ti
             store.read_near(n, Some((&core, reach)), &mut tp, |p, _| within(&core, reach, p) && read(p))?;
         }
     }
-    let own = drop_duplicates(&mut tp, own);
+    Ok((tp, own))
+}
+
+/// The loaded tile `tp` with its core flags (its own points `own`, drawn for evaluation), the
+/// kept points averaged over balls if the loading averages (see [`load`]).
+fn flagged(tp: TilePoints, own: std::ops::Range<usize>, core: &crate::points::Bounds, l: &Loading) -> (TilePoints, Vec<bool>) {
+    let (halo, keep) = (l.halo, l.keep);
+    let averaged = l.average > 0.0 && keep < 1.0;
+    let kept = |key| keep >= 1.0 || keep_point(key, keep, l.seed);
+    let member = |key: u64| averaged && (l.average_share >= 1.0 || keep_point(key ^ salts::AVERAGED, l.average_share, l.seed));
     let is_core = |k: usize, p: DVec3| {
         // (A key of its own, so that which points are evaluated does not follow which are kept.)
         own.contains(&k) && (l.evaluate >= 1.0 || keep_point(position_key(p, l.key_quantum) ^ salts::EVALUATED, l.evaluate, l.seed))
     };
     if !averaged {
         let flags = tp.xyz.iter().enumerate().map(|(k, &p)| is_core(k, p)).collect();
-        return Ok((tp, flags));
+        return (tp, flags);
     }
     let keys: Vec<u64> = tp.xyz.par_iter().map(|&p| position_key(p, l.key_quantum)).collect();
-    let chosen: Vec<usize> = (0..tp.xyz.len()).filter(|&k| (own.contains(&k) || within(&core, halo, tp.xyz[k])) && kept(keys[k])).collect();
+    let chosen: Vec<usize> = (0..tp.xyz.len()).filter(|&k| (own.contains(&k) || within(core, halo, tp.xyz[k])) && kept(keys[k])).collect();
     let members: Vec<DVec3> = tp.xyz.iter().zip(&keys).filter(|&(_, &key)| member(key)).map(|(&p, _)| p).collect();
     let balls = Balls::new(&members, l.average, l.key_quantum);
     // (Taken cell by cell, so that neighbouring balls search the same runs of cells while
@@ -180,7 +223,7 @@ pub(crate) fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(Ti
     }
     let out = TilePoints { xyz, gid: chosen.iter().map(|&k| tp.gid[k]).collect() };
     let flags = chosen.iter().map(|&k| is_core(k, tp.xyz[k])).collect();
-    Ok((out, flags))
+    (out, flags)
 }
 
 /// Drops every point of `tp` at the very position of another with a smaller global id (scans
@@ -188,7 +231,7 @@ pub(crate) fn load(store: Store, grid: &Grid, t: u32, l: &Loading) -> Result<(Ti
 /// of every point made the spacing, measured from the 16th neighbour, a third of the true one.
 /// Every copy of a point lies in the tiles that read any of them, so each keeps the same one.
 /// Returns where the tile's own points, `own` before, now are.
-fn drop_duplicates(tp: &mut TilePoints, own: std::ops::Range<usize>) -> std::ops::Range<usize> {
+pub(super) fn drop_duplicates(tp: &mut TilePoints, own: std::ops::Range<usize>) -> std::ops::Range<usize> {
     // (0.0 added: -0.0 and 0.0 are the same position.)
     let bits = |p: DVec3| crate::keys::bits_key(p + DVec3::ZERO);
     // (Most clouds hold no copy: a sort of one hash a point tells, at a fraction of the cost of
@@ -220,6 +263,56 @@ fn drop_duplicates(tp: &mut TilePoints, own: std::ops::Range<usize>) -> std::ops
     let mut keep = vec![true; tp.xyz.len()];
     for k in copy {
         keep[k as usize] = false;
+    }
+    let before = |end: usize| keep[..end].iter().filter(|&&k| k).count();
+    let own = before(own.start)..before(own.end);
+    let mut k = 0;
+    tp.xyz.retain(|_| (keep[k], k += 1).0);
+    k = 0;
+    tp.gid.retain(|_| (keep[k], k += 1).0);
+    own
+}
+
+/// Drops every point of `tp` within `radius` of another with a smaller global id (copies
+/// that went through a transform or another scale; see [`Loading::near`]), then the points
+/// that are neither the tile's own (`own`) nor `inside` the loaded reach: those were read only
+/// so that every point inside has all the points within `radius` of it, and is decided the
+/// same way by every tile that reads it. Returns where the own points now are.
+fn drop_near(tp: &mut TilePoints, own: std::ops::Range<usize>, radius: f64, inside: impl Fn(DVec3) -> bool + Sync) -> std::ops::Range<usize> {
+    // (Cells of half the radius: any two points in one cell are within it, and its points
+    // lie within two cells of each other along every axis.)
+    let side = 0.5 * radius;
+    let cell = |p: DVec3| {
+        let c = (p / side).floor();
+        [c.x as i64, c.y as i64, c.z as i64]
+    };
+    let mut order: Vec<([i64; 3], u64, u32)> = tp.xyz.par_iter().zip(&tp.gid).enumerate().map(|(k, (&p, &g))| (cell(p), g, k as u32)).collect();
+    order.par_sort_unstable();
+    // Each cell's run of points, in global id order.
+    let mut runs: std::collections::HashMap<[i64; 3], (usize, usize)> = std::collections::HashMap::new();
+    for (n, o) in order.iter().enumerate() {
+        runs.entry(o.0).or_insert((n, n)).1 = n + 1;
+    }
+    let (xyz, r2) = (&tp.xyz, radius * radius);
+    // A cell's first point is dropped if a point of a cell around with a smaller id is near;
+    // the cell's other points, by the first.
+    let near_first = |&(start, _): &(usize, usize)| {
+        let (c, g, k) = order[start];
+        let p = xyz[k as usize];
+        let around = (0..125).map(|d: i64| [c[0] + d % 5 - 2, c[1] + d / 5 % 5 - 2, c[2] + d / 25 - 2]).filter_map(|n| runs.get(&n));
+        // (Runs are in id order: only their points of smaller id are looked at.)
+        around.flat_map(|&(a, b)| order[a..b].iter().take_while(|o| o.1 < g)).any(|o| xyz[o.2 as usize].distance_squared(p) <= r2)
+    };
+    let cells: Vec<(usize, usize)> = runs.values().copied().collect();
+    let dropped_first: Vec<bool> = cells.par_iter().map(near_first).collect();
+    let mut keep = vec![true; xyz.len()];
+    for (&(start, end), &gone) in cells.iter().zip(&dropped_first) {
+        for o in &order[start + usize::from(!gone)..end] {
+            keep[o.2 as usize] = false;
+        }
+    }
+    for (k, p) in xyz.iter().enumerate() {
+        keep[k] &= own.contains(&k) || inside(*p);
     }
     let before = |end: usize| keep[..end].iter().filter(|&&k| k).count();
     let own = before(own.start)..before(own.end);

@@ -157,6 +157,8 @@ fn plan_anew(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Boun
         cleaned: false,
         kept: None,
         far_points: 0,
+        near_radius: 0.0,
+        duplicates: [0, 0],
         points_min: None,
         workers: worker.map(|w| w.count),
         layout: manifest::LAYOUT,

@@ -2,6 +2,7 @@
 //! records of the codec (see [`crate::codec`]): one file a tile (or block) and pass,
 //! `<dir>/<number>.bin`, written atomically.
 
+use super::pass::Dropped;
 use crate::codec::{self, Reader, Writer};
 use crate::curves::{Polyline, Shape, Vertex};
 use crate::error::{Error, Result};
@@ -57,25 +58,61 @@ fn decode_all<R: Record>(raw: &[u8], path: &Path) -> Result<R> {
     Ok(rec)
 }
 
-/// The statistics of a tile's sampled points, in global id order.
-pub(crate) struct Stats(pub Vec<PointStats>);
+/// The statistics of a tile's sampled points, in global id order, and the copies of the tile's
+/// own points that were dropped as it was loaded.
+pub(crate) struct Stats {
+    /// The sampled points' statistics.
+    pub stats: Vec<PointStats>,
+    /// The tile's own points dropped as copies.
+    pub dropped: Dropped,
+}
 
 impl Record for Stats {
     const KIND: [u8; 4] = *b"STAT";
     const DIR: &'static str = "stats";
 
     fn encode(&self, w: &mut Writer) {
-        w.u64(self.0.len() as u64);
-        for s in &self.0 {
+        w.u64(self.dropped.exact);
+        w.u64(self.dropped.near);
+        w.u64(self.stats.len() as u64);
+        for s in &self.stats {
             w.f64(s.spacing);
             w.f64(s.noise);
             w.f64(s.density);
+            w.u8(s.twin as u8);
         }
     }
 
     fn decode(r: &mut Reader) -> Result<Self> {
-        let n = r.count(24)?;
-        (0..n).map(|_| Ok(PointStats { spacing: r.f64()?, noise: r.f64()?, density: r.f64()? })).collect::<Result<_>>().map(Stats)
+        let dropped = Dropped { exact: r.u64()?, near: r.u64()? };
+        let n = r.count(25)?;
+        let one = |r: &mut Reader| Ok(PointStats { spacing: r.f64()?, noise: r.f64()?, density: r.f64()?, twin: r.u8()? != 0 });
+        let stats = (0..n).map(|_| one(r)).collect::<Result<_>>()?;
+        Ok(Stats { stats, dropped })
+    }
+}
+
+/// The statistics of a tile measured again with near duplicates collapsed (see
+/// [`crate::extract::statistics::near_duplicate_radius`]): kept apart from the first
+/// measurement's, so that a worker still writing those cannot mix them in.
+pub(crate) struct NearStats(pub(crate) Stats);
+
+impl Record for NearStats {
+    const KIND: [u8; 4] = *b"STAN";
+    const DIR: &'static str = "stats_near";
+
+    fn encode(&self, w: &mut Writer) {
+        self.0.encode(w)
+    }
+
+    fn decode(r: &mut Reader) -> Result<Self> {
+        Stats::decode(r).map(NearStats)
+    }
+}
+
+impl From<Stats> for NearStats {
+    fn from(s: Stats) -> NearStats {
+        NearStats(s)
     }
 }
 

@@ -8,7 +8,7 @@ use super::far;
 use super::manifest;
 use super::pass::{self, tile_pass, CloudLoading, Loading};
 use super::plan::tile_size_for;
-use super::records::{self, Edges, Residuals, Stats};
+use super::records::{self, Edges, NearStats, Record, Residuals, Stats};
 use super::state::{done, Run, Step};
 use crate::error::{Error, Result};
 use crate::extract::candidates::{self, ResidualSum};
@@ -43,7 +43,9 @@ impl Run<'_> {
         let r = done!(self.statistics(params)?);
         // (All points at one position, or too few apart: every length of the method is zero.)
         if !(r.kappa > 0.0 && r.kappa.is_finite() && r.fit_radius > 0.0 && r.rmls_radius > 0.0) {
-            return Err(Error::input(first_input, format!("the points have no spread (spacing {}): nothing to extract", r.kappa)));
+            let copies = self.manifest.duplicates.iter().sum::<u64>();
+            let copies = if copies > 0 { format!("; {copies} of the {total} points are copies of others") } else { String::new() };
+            return Err(Error::input(first_input, format!("the points have no spread (spacing {}{copies}): nothing to extract", r.kappa)));
         }
         self.tau = done!(self.residuals(&r, params)?);
         done!(self.projection(&r)?);
@@ -101,31 +103,73 @@ impl Run<'_> {
         manifest::save(&self.ws, &self.manifest)
     }
 
-    /// Statistics pass: spacing, noise and density at sampled points, with a first halo wide
-    /// enough for the 16-kappa fits (kappa from a probe of the fullest tile; tiles whose noise
-    /// fits reach farther are loaded again, wider); then the parameters are resolved from them.
+    /// Statistics pass: spacing, noise and density at sampled points (see
+    /// [`Run::stats_pass`]); then the parameters are resolved from them. Where the samples
+    /// show near duplicates (see [`statistics::near_duplicate_radius`]), they were measured
+    /// over the copies, and the pass runs again with the copies collapsed, as the later
+    /// passes collapse them.
     fn statistics(&mut self, params: &Params) -> Result<Step<Resolved>> {
         let t = Instant::now();
         if let Some(r) = &self.manifest.resolved {
             self.pass.statistics = t.elapsed().as_secs_f64();
             return Ok(Step::Done(r.clone()));
         }
-        self.repair::<Stats>()?;
+        if self.manifest.near_radius == 0.0 {
+            let first = done!(self.stats_pass::<Stats>(params, 0.0)?);
+            let all: Vec<_> = first.iter().flat_map(|s| s.stats.iter().copied()).collect();
+            match statistics::near_duplicate_radius(&all) {
+                None => return self.resolved(params, first, 0.0, t),
+                Some(near) => {
+                    self.manifest.near_radius = near;
+                    self.save_manifest()?;
+                }
+            }
+        }
+        let near = self.manifest.near_radius;
+        let again = done!(self.stats_pass::<NearStats>(params, near)?);
+        self.resolved(params, again.into_iter().map(|s| s.0).collect(), near, t)
+    }
+
+    /// The parameters resolved from the tiles' statistics `stats`, measured with near
+    /// duplicates collapsed within `near`; recorded in the manifest with the copies counted.
+    fn resolved(&mut self, params: &Params, stats: Vec<Stats>, near: f64, t: Instant) -> Result<Step<Resolved>> {
+        self.manifest.duplicates = stats.iter().fold([0, 0], |a, s| [a[0] + s.dropped.exact, a[1] + s.dropped.near]);
+        let all: Vec<_> = stats.into_iter().flat_map(|s| s.stats).collect();
+        let mut r = crate::extract::params::resolve(params, &all);
+        r.near = near;
+        self.manifest.resolved = Some(r.clone());
+        self.save_manifest()?;
+        self.pass.statistics = t.elapsed().as_secs_f64();
+        Ok(Step::Done(r))
+    }
+
+    /// One statistics pass, its records `R`, with near duplicates collapsed within `near` (0:
+    /// exact copies only), with a first halo wide enough for the 16-kappa fits (kappa from a
+    /// probe of the fullest tile, copies dropped; tiles whose noise fits reach farther are
+    /// loaded again, wider). Returns every tile's record.
+    fn stats_pass<R: Record + From<Stats> + Send>(&mut self, params: &Params, near: f64) -> Result<Step<Vec<R>>> {
+        self.repair::<R>()?;
         let (store, grid) = (Store::new(&self.ws)?, &self.manifest.grid);
         let tile_points = &self.manifest.tile_points;
         let fullest = *self.tiles.iter().max_by_key(|&&t| (tile_points[t as usize], std::cmp::Reverse(t))).expect("a tile with points");
         let mut probe = TilePoints::default();
         store.read(fullest, &mut probe, |_, _| true)?;
+        // (A million copies of one point in one kd-tree bucket took a minute to query.)
+        let own = 0..probe.xyz.len();
+        pass::drop_duplicates(&mut probe, own);
+        self.opts.cancel.check()?;
         let kappa0 = crate::spacing::spacing(&probe.xyz, 2000);
         drop(probe);
         let total: u64 = tile_points.iter().sum();
         let seed = params.seed.unwrap_or(crate::extract::params::DEFAULT_SEED);
-        let loading = |halo| Loading { halo, keep: 1.0, evaluate: 1.0, seed, key_quantum: self.kq, counts: tile_points, average: 0.0, average_share: 1.0 };
+        let loading =
+            |halo| Loading { halo, keep: 1.0, evaluate: 1.0, seed, key_quantum: self.kq, counts: tile_points, average: 0.0, average_share: 1.0, near };
         let halo0 = 24.0 * kappa0;
         // The widest halo that the noise balls of the tiles computed so far asked for: the
         // tiles loaded after them start with it rather than loading twice. (Which tiles do
         // depends on timing; what they compute does not.)
         let asked = std::sync::atomic::AtomicU64::new(halo0.to_bits());
+        let cancel = &self.opts.cancel;
         // (The pool has little to do here but wait for the next tile, so the tile is indexed
         // on the pool, not on the loader thread as in the passes below.)
         let time = tile_pass(
@@ -134,35 +178,36 @@ impl Run<'_> {
             &self.share(),
             |t, _| {
                 let halo = f64::from_bits(asked.load(std::sync::atomic::Ordering::Relaxed));
-                pass::load(store, grid, t, &loading(halo)).map(|first| (first, halo))
+                pass::load_counted(store, grid, t, &loading(halo)).map(|first| (first, halo))
             },
-            |t, (first, loaded)| {
-                let tile = StatsTile { core: grid.core(t), halo: halo0, key_quantum: self.kq, total, seed };
+            |t, ((first, dropped), loaded)| {
+                let tile = StatsTile { core: grid.core(t), halo: halo0, key_quantum: self.kq, total, seed, cancel };
                 let (stats, wider) = statistics::tile_statistics(first, loaded, &tile, |halo| pass::load(store, grid, t, &loading(halo)))?;
                 // (The bits of positive numbers order as the numbers do.)
                 asked.fetch_max(wider.to_bits(), std::sync::atomic::Ordering::Relaxed);
-                Ok(Stats(stats))
+                Ok(R::from(Stats { stats, dropped }))
             },
         )?;
-        self.pass.statistics_load = time.load;
-        done!(self.all_done::<Stats>("statistics"));
-        let mut stats = vec![];
-        for &t in &self.tiles {
-            stats.extend(records::read::<Stats>(&self.ws, t)?.0);
-        }
-        let r = crate::extract::params::resolve(params, &stats);
-        self.manifest.resolved = Some(r.clone());
-        self.save_manifest()?;
-        self.pass.statistics = t.elapsed().as_secs_f64();
-        Ok(Step::Done(r))
+        self.pass.statistics_load += time.load;
+        done!(self.all_done::<R>("statistics"));
+        Ok(Step::Done(self.tiles.iter().map(|&t| records::read::<R>(&self.ws, t)).collect::<Result<_>>()?))
     }
 
     /// How the residual and projection passes load a tile: the same way in both, so that the
     /// residuals come back in the cloud's order.
     fn cloud_loading(&self, r: &Resolved) -> Result<CloudLoading<'_>> {
         let (halo, keep, average, average_share) = (r.halo(), r.keep, r.average, r.average_share);
-        let loading =
-            Loading { halo, keep, evaluate: r.evaluate, seed: r.seed, key_quantum: self.kq, counts: &self.manifest.tile_points, average, average_share };
+        let loading = Loading {
+            halo,
+            keep,
+            evaluate: r.evaluate,
+            seed: r.seed,
+            key_quantum: self.kq,
+            counts: &self.manifest.tile_points,
+            average,
+            average_share,
+            near: r.near,
+        };
         Ok(CloudLoading { store: Store::new(&self.ws)?, grid: &self.manifest.grid, loading, cell_side: r.cell_side(), cancel: &self.opts.cancel })
     }
 

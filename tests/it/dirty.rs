@@ -128,3 +128,35 @@ fn notes_among_the_scans_are_passed_over() {
     assert!(err.contains("passed over 2 entries that are not point files") && err.contains("readme.txt, todo.txt"), "{err}");
     assert!(err.contains("12 curves from 20000 points"), "{err}");
 }
+
+/// A cube whose every point is written twice, the copy moved by a ten-thousandth of the
+/// spacing (a copy that went through a transform, not bit-identical): the copies are
+/// collapsed as near duplicates and counted, and the curves are the cube's 12, the same to
+/// the byte in tiles as in one (which copy is kept is decided the same way in every tile).
+/// Before, the spacing was measured over the copies and the cube gave 14 curves.
+#[test]
+fn near_copies_are_collapsed_and_counted() {
+    let d = tempfile::tempdir().unwrap();
+    let (cube, _) = plain_cube(d.path());
+    let spacing = (6.0 / cube.len() as f64).sqrt();
+    let mut rng = crease::rng::Rng::stream(3, 0);
+    let mut jitter = || 1e-4 * spacing * (2.0 * rng.f64() - 1.0);
+    let twice: Vec<DVec3> = cube.iter().copied().chain(cube.iter().map(|&p| p + DVec3::new(jitter(), jitter(), jitter()))).collect();
+    let p = d.path().join("twice.ply");
+    let mut w = crease::io::PointWriter::create(&p, &crease::io::WriteOptions { scale: 1e-12, offset: DVec3::ZERO, epsg: None }).unwrap();
+    w.write(&twice, &vec![0; twice.len()]).unwrap();
+    w.finish().unwrap();
+    let one = extract(&p, &d.path().join("run_one"));
+    assert_eq!(crease::curves::read_obj(&d.path().join("run_one/curves.obj")).unwrap().len(), 12);
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(d.path().join("run_one/report.json")).unwrap()).unwrap();
+    assert_eq!((report["counts"]["exact_duplicates"].as_u64(), report["counts"]["near_duplicates"].as_u64()), (Some(0), Some(cube.len() as u64)));
+    let tiled = d.path().join("run_tiled");
+    let run = Command::new(env!("CARGO_BIN_EXE_crease"))
+        .args(["extract", p.to_str().unwrap(), "-o", tiled.to_str().unwrap(), "-q", "--tile-size", "0.3"])
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(std::fs::read(tiled.join("curves.obj")).unwrap() == one, "other curves in tiles of 0.3");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(tiled.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["counts"]["near_duplicates"].as_u64(), Some(cube.len() as u64), "in tiles");
+}

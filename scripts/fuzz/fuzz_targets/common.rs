@@ -7,8 +7,14 @@ use std::path::PathBuf;
 /// The input file of this process (in /dev/shm when there is one: the bytes are rewritten
 /// at every execution).
 fn file(ext: &str) -> PathBuf {
+    scratch(&format!("in.{ext}"))
+}
+
+/// A scratch file of this process, named `name` (in /dev/shm when there is one).
+#[allow(dead_code)]
+pub fn scratch(name: &str) -> PathBuf {
     let base = if std::path::Path::new("/dev/shm").is_dir() { PathBuf::from("/dev/shm") } else { std::env::temp_dir() };
-    base.join(format!("crease-fuzz-{}.{ext}", std::process::id()))
+    base.join(format!("crease-fuzz-{}-{name}", std::process::id()))
 }
 
 pub fn read_as(ext: &str, data: &[u8]) {
