@@ -32,7 +32,8 @@
 //!   `survey/`, `smoothed/`, `pieces/`: the curve stage's, one file per growth block;
 //!   `finished/`: the curves a batch at a time; each file a record of the codec (see `codec.rs`:
 //!   a header with the kind of record, a format number and a CRC-32, then a zstd payload);
-//! - `curves.*`, `preview.png`, `report.json`: the outputs;
+//! - `curves.*`, `preview.png`, `report.json`: the outputs; `labels/`: the inputs' points
+//!   labelled by the curves, with `--label-points` (`labels.rs`);
 //! - `lock`, and `lock.<i>` for worker `i` of several sharing the run ([`run_worker`]), removed
 //!   when the run ends.
 //!
@@ -64,6 +65,7 @@ mod curves;
 pub(crate) mod far;
 mod grow;
 mod inputs;
+mod labels;
 mod layout;
 pub mod manifest;
 pub(crate) mod pass;
@@ -78,10 +80,11 @@ mod types;
 
 pub(crate) use bucket::Input;
 pub use budgets::{BYTES_PER_POINT, MAX_TILE_POINTS, MIN_MEMORY};
+pub use labels::DIR as LABELS;
 pub use layout::{write_view, OUTPUTS};
 pub use manifest::{common_crs, InputStamp, Job, Manifest};
 pub use plan::tile_size_for;
-pub use status::{render_status, status, Status};
+pub use status::{render_status, status, PieceCounts, Status};
 pub use types::{check_threads, Extraction, PassSeconds, ProjectionCost, Report, RunOptions, ShapeCounts, Worker, WorkerStep, MAX_THREADS_PER_CORE};
 
 use crate::curves::{Curves, Outside};
@@ -195,6 +198,7 @@ fn extract_files(mut run: Run, mut found: InputFiles, params: &Params, filter: &
     let stage = done!(run.curves(&r, &outside)?);
     found.warnings.extend(clusters_cut_warning(&stage.counts));
     let shapes = run.write(stage.batches, &found.crs, &r)?;
+    run.labels = run.label_points(stage.batches, &r, &found.files, filter.text)?;
     found.warn_coarse_coordinates(&run.manifest.grid, r.kappa);
     let report = report(&mut run, found, r, stage, outside, shapes);
     run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
@@ -254,6 +258,7 @@ fn report(run: &mut Run, found: InputFiles, r: Resolved, stage: CurveStage, outs
         crs: found.crs,
         outside,
         shapes,
+        labels: std::mem::take(&mut run.labels),
     }
 }
 

@@ -124,7 +124,7 @@ fn plan_anew(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Boun
         None => None,
     };
     remove_working_data(ws);
-    for name in [VIEW].into_iter().chain(OUTPUTS) {
+    for name in [VIEW, super::labels::DIR].into_iter().chain(OUTPUTS) {
         ws.remove(name);
     }
     if let Some(w) = &work_dir {
