@@ -476,16 +476,21 @@ pub(super) fn label_ply(input: &Path, output: &Path, labeller: &dyn super::Label
     // values is its line break: kept.)
     let first = if ascii && count > 0 { skip_space(&r.map, r.pos) } else { r.pos };
     w.write_all(&r.map[r.body..first]).map_err(out)?;
+    // (An ascii vertex line ends as the header's lines do.)
+    let eol = if r.map[..r.body].ends_with(b"\r\n") { "\r\n" } else { "\n" };
     let (mut xyz, mut spans, mut labels, mut bytes) = (vec![], vec![], vec![], vec![]);
     while r.read_spans(super::labels::LABEL_CHUNK, &mut xyz, &mut spans)? > 0 {
         cancel.check()?;
         labeller.label(&xyz, &mut labels);
         bytes.clear();
         for (s, l) in spans.iter().zip(&labels) {
-            bytes.extend_from_slice(&r.map[s.clone()]);
             if ascii {
-                bytes.extend_from_slice(format!(" {} {} {}\n", l.distance, l.curve, l.edge).as_bytes());
+                // (The span runs on over the white space after the line's last value.)
+                let values = r.map[s.clone()].trim_ascii_end();
+                bytes.extend_from_slice(values);
+                bytes.extend_from_slice(format!(" {} {} {}{eol}", l.distance, l.curve, l.edge).as_bytes());
             } else {
+                bytes.extend_from_slice(&r.map[s.clone()]);
                 l.push_bytes(&mut bytes, r.enc == Encoding::Big);
             }
         }

@@ -275,3 +275,31 @@ fn status_lists_the_typed_pieces_by_kind() {
     let text = String::from_utf8_lossy(&crease(&["status", dir.to_str().unwrap()]).stdout).into_owned();
     assert!(text.contains(&format!("pieces     {} lines", count("line"))), "{text}");
 }
+
+/// An ascii PLY (CRLF line ends) gets an ascii copy: each vertex line with its values as they
+/// were and the three labels after them, the lines after the vertices as they were.
+#[test]
+fn an_ascii_ply_gets_its_lines_with_the_labels_after_them() {
+    let d = tempfile::tempdir().unwrap();
+    let cube: Vec<DVec3> = points_of(&mut las::Reader::from_path(fixture("cube.las")).unwrap()).iter().map(|p| DVec3::new(p.x, p.y, p.z)).collect();
+    let (ply, dir) = (d.path().join("cube.ply"), d.path().join("run"));
+    let head = format!("ply\r\nformat ascii 1.0\r\nelement vertex {}\r\nproperty double x\r\nproperty double y\r\nproperty double z\r\nelement face 1\r\nproperty list uchar int vertex_indices\r\nend_header\r\n", cube.len());
+    let lines: Vec<String> = cube.iter().map(|p| format!("{} {} {}", p.x, p.y, p.z)).collect();
+    std::fs::write(&ply, format!("{head}{}\r\n3 0 1 2\r\n", lines.join("\r\n"))).unwrap();
+    extract(&[&ply], &dir, &["--label-points", "--format", "ply,json"]);
+    let out = std::fs::read_to_string(dir.join("labels/cube.ply")).unwrap();
+    let (header, body) = out.split_once("end_header\r\n").unwrap();
+    assert!(header.ends_with("property double z\r\nproperty double edge_distance\r\nproperty int curve_id\r\nproperty uchar edge\r\nelement face 1\r\nproperty list uchar int vertex_indices\r\n"), "{header}");
+    let got: Vec<&str> = body.split("\r\n").collect();
+    assert_eq!(got.len(), cube.len() + 2);
+    assert_eq!(&got[cube.len()..], ["3 0 1 2", ""]);
+    let mut labels = vec![];
+    for (line, want) in got.iter().zip(&lines) {
+        let (values, rest) = line.split_at(want.len());
+        assert_eq!(values, want);
+        let l: Vec<&str> = rest.split_whitespace().collect();
+        labels.push((l[0].parse().unwrap(), l[1].parse().unwrap(), l[2].parse().unwrap()));
+    }
+    let curves = read_ply(&dir.join("curves.ply")).unwrap();
+    assert!(check_labels(&cube, &labels, &curves, tolerance(&dir)) > 100);
+}
