@@ -36,7 +36,8 @@ pub const LABEL_FIELDS: [&str; 3] = ["edge_distance", "curve_id", "edge"];
 /// Bytes the three fields take in a record: f64, i32, u8.
 pub(super) const LABEL_BYTES: u16 = 13;
 
-/// What a point is labelled with.
+/// What a point is labelled with (with no curves at all: an infinite distance, no curve, not an
+/// edge).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Label {
     /// Distance to the nearest curve, model units.
