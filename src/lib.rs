@@ -5,11 +5,13 @@
 //!
 //! Modules, in the order data flows through a run (each imports only modules listed above it,
 //! or the leaves at the end):
-//! - [`io`]: reads LAS/LAZ/PLY headers and streams their points in chunks ([`points`] types);
+//! - [`io`]: reads LAS/LAZ/PLY headers and streams their points in chunks ([`points`] types),
+//!   and writes the inputs' labelled copies (`--label-points`);
 //! - [`info`]: `crease info`, a file's header, CRS and spacing estimate;
 //! - `tiles`: the tile grid, the tile store (tiles written once, halos assembled on read),
 //!   the bucketer;
-//! - [`curves`]: the output polylines and their OBJ, PLY and GeoJSON writers and readers;
+//! - [`curves`]: the output polylines and their OBJ, PLY and GeoJSON writers and readers, and the
+//!   nearest curve to a point;
 //! - `preview`: `preview.png`, the cloud and its curves from two sides;
 //! - [`extract`]: the method, stage by stage, as functions of plain data (statistics,
 //!   candidates, projection, smoothing, growing, completion);

@@ -517,6 +517,13 @@ struct ExtractArgs {
     /// as --min-confidence.
     #[arg(long, value_name = "up|X,Y,Z[;X,Y,Z]|unknown", value_parser = crease::curves::Outside::parse)]
     outside: Option<crease::curves::Outside>,
+    /// Also write a copy of each input file's points, in order and with all their fields, with
+    /// three more: edge_distance (to the nearest curve), curve_id (that curve's id, -1 beyond
+    /// the halo) and edge (1 within the typed curves' tolerance), to OUT/labels/<file stem>.laz
+    /// (LAS 1.4 extra bytes; .ply with three more vertex properties for a PLY input). An
+    /// output setting, as --min-confidence.
+    #[arg(long)]
+    label_points: bool,
 }
 
 #[derive(Args)]
@@ -607,7 +614,8 @@ fn extract_cmd(a: ExtractArgs) -> Result<(), Error> {
             },
         };
         if a.json {
-            let outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).filter(|f| f.is_file()).collect();
+            let mut outputs: Vec<PathBuf> = crease::run::OUTPUTS.iter().map(|f| dir.join(f)).filter(|f| f.is_file()).collect();
+            outputs.extend(r.labels.iter().cloned());
             summaries.push(serde_json::json!({"dir": dir, "outputs": outputs, "report": r}));
         }
         if !a.quiet {
@@ -652,6 +660,7 @@ fn run_options(a: &ExtractArgs) -> crease::run::RunOptions {
         outside: a.outside.clone(),
         recursive: a.recursive,
         formats: a.format.clone(),
+        label_points: a.label_points,
         work_dir: None,
         clean: a.clean,
         block_steps: a.block_steps,

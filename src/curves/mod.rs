@@ -50,6 +50,7 @@
 mod dxf;
 mod geojson;
 mod gpkg;
+pub mod nearest;
 mod obj;
 mod ply;
 mod shape;

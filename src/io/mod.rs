@@ -24,15 +24,19 @@
 //!   line that does not parse, or one longer than 64 KiB, is an error naming it; files of a
 //!   directory with no numeric line among their first ones are passed over with a warning.
 //!
+//! [`write_labelled`] copies a file's points with labels added (`--label-points`).
+//!
 //! Files without a CRS beside files with one are taken to be in the others' CRS, with a warning;
 //! files that disagree on the CRS are refused.
 
 mod e57;
+mod labels;
 mod las;
 mod ply;
 mod text;
 mod write;
 
+pub use labels::{labelled_extension, write_labelled, Label, Labeller, LABEL_CHUNK, LABEL_FIELDS};
 pub use text::TextColumns;
 pub use write::{PointWriter, WriteOptions};
 

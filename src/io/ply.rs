@@ -106,6 +106,8 @@ pub(super) struct PlyReader {
     xyz: [usize; 3],
     /// Byte position of the next vertex (binary) or of the next token (ascii).
     pos: usize,
+    /// Where the data starts, after the header's last line.
+    body: usize,
     next: u64,
 }
 
@@ -241,7 +243,7 @@ impl PlyReader {
         };
         #[cfg(unix)]
         let _ = map.advise(memmap2::Advice::Sequential);
-        Ok(PlyReader { path: path.to_path_buf(), header, map, enc, vertex, xyz, pos, next: 0 })
+        Ok(PlyReader { path: path.to_path_buf(), header, map, enc, vertex, xyz, pos, body, next: 0 })
     }
 
     /// The file's header (bounds are empty: PLY headers do not hold them).
@@ -397,4 +399,112 @@ fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
     // The header is short; search only its first 64 KiB.
     let hay = &hay[..hay.len().min(1 << 16)];
     hay.windows(needle.len()).position(|w| w == needle)
+}
+
+impl PlyReader {
+    /// Reads up to `max` vertices into `xyz` (replaced), with the bytes of each one's record in
+    /// `spans` (ascii: from its first value to its last); returns how many were read.
+    fn read_spans(&mut self, max: usize, xyz: &mut Vec<DVec3>, spans: &mut Vec<std::ops::Range<usize>>) -> Result<usize> {
+        xyz.clear();
+        spans.clear();
+        let n = (max as u64).min(self.header.count - self.next) as usize;
+        let mut v = [0.0f64; 3];
+        for i in 0..n {
+            let idx = self.next + i as u64;
+            let start = match self.enc {
+                Encoding::Ascii => skip_space(&self.map, self.pos),
+                _ => self.pos,
+            };
+            match self.enc {
+                Encoding::Ascii => self.read_ascii_vertex(&mut v, idx)?,
+                enc => self.read_binary_vertex(&mut v, idx, enc)?,
+            }
+            xyz.push(DVec3::from(v));
+            spans.push(start..self.pos);
+        }
+        self.next += n as u64;
+        Ok(n)
+    }
+
+    /// The header of the labelled copy: the vertex element's properties followed by the
+    /// labels'. Refused if the vertices already have a property of a label's name.
+    fn labelled_header(&self) -> Result<Vec<u8>> {
+        if let Some(p) = self.vertex.props.iter().find(|p| super::labels::LABEL_FIELDS.contains(&p.name.as_str())) {
+            return Err(bad(&self.path, format!("already has a vertex property named {}, which the labelled copy would add", p.name)));
+        }
+        let text = std::str::from_utf8(&self.map[..self.body]).map_err(|_| bad(&self.path, "PLY header is not text"))?;
+        let (mut out, mut in_vertex) = (String::with_capacity(text.len() + 128), false);
+        for line in text.split_inclusive('\n') {
+            let first = line.split_whitespace().next();
+            if in_vertex && matches!(first, Some("element" | "end_header")) {
+                let eol = if line.ends_with("\r\n") { "\r\n" } else { "\n" };
+                for p in ["double edge_distance", "int curve_id", "uchar edge"] {
+                    out += &format!("property {p}{eol}");
+                }
+                in_vertex = false;
+            }
+            if first == Some("element") && line.split_whitespace().nth(1) == Some("vertex") {
+                in_vertex = true;
+            }
+            out += line;
+        }
+        Ok(out.into_bytes())
+    }
+}
+
+/// The first position at or after `pos` that is not white space.
+fn skip_space(map: &[u8], mut pos: usize) -> usize {
+    while pos < map.len() && map[pos].is_ascii_whitespace() {
+        pos += 1;
+    }
+    pos
+}
+
+/// Writes the labelled copy of the PLY file `input` to `output` (see [`super::labels`]): its
+/// header with the label properties added to the vertex element, then its data, each vertex
+/// followed by its labels (in binary, in the file's byte order; in ascii, as three more values
+/// on its line). Returns the number of vertices.
+pub(super) fn label_ply(input: &Path, output: &Path, labeller: &dyn super::Labeller, cancel: &crate::cancel::Cancel) -> Result<u64> {
+    use std::io::Write;
+    let mut r = PlyReader::open(input)?;
+    let out = |e| Error::output(output, e);
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, File::create(output).map_err(out)?);
+    w.write_all(&r.labelled_header()?).map_err(out)?;
+    let ascii = r.enc == Encoding::Ascii;
+    let count = r.header.count;
+    // (In ascii, what lies between the elements before the vertices and the first vertex's
+    // values is its line break: kept.)
+    let first = if ascii && count > 0 { skip_space(&r.map, r.pos) } else { r.pos };
+    w.write_all(&r.map[r.body..first]).map_err(out)?;
+    // (An ascii vertex line ends as the header's lines do.)
+    let eol = if r.map[..r.body].ends_with(b"\r\n") { "\r\n" } else { "\n" };
+    let (mut xyz, mut spans, mut labels, mut bytes) = (vec![], vec![], vec![], vec![]);
+    while r.read_spans(super::labels::LABEL_CHUNK, &mut xyz, &mut spans)? > 0 {
+        cancel.check()?;
+        labeller.label(&xyz, &mut labels);
+        bytes.clear();
+        for (s, l) in spans.iter().zip(&labels) {
+            if ascii {
+                // (The span runs on over the white space after the line's last value.)
+                let values = r.map[s.clone()].trim_ascii_end();
+                bytes.extend_from_slice(values);
+                bytes.extend_from_slice(format!(" {} {} {}{eol}", l.distance, l.curve, l.edge).as_bytes());
+            } else {
+                bytes.extend_from_slice(&r.map[s.clone()]);
+                l.push_bytes(&mut bytes, r.enc == Encoding::Big);
+            }
+        }
+        w.write_all(&bytes).map_err(out)?;
+    }
+    // (In ascii the last vertex's line break was written with it.)
+    let mut rest = r.pos;
+    if ascii && count > 0 {
+        while rest < r.map.len() && matches!(r.map[rest], b' ' | b'\t' | b'\r') {
+            rest += 1;
+        }
+        rest += (r.map.get(rest) == Some(&b'\n')) as usize;
+    }
+    w.write_all(&r.map[rest..]).map_err(out)?;
+    w.flush().map_err(out)?;
+    Ok(count)
 }

@@ -87,7 +87,7 @@ pub(super) fn is_run_file(dir: &Path, f: &Path) -> bool {
     let top = rel.components().next().map(|c| c.as_os_str().to_string_lossy().into_owned()).unwrap_or_default();
     // (Workers' locks are `lock.<i>`.)
     // (The working data of a run of the older layout is at the top.)
-    (WORKING.contains(&top.as_str()) || [WORK, "out.tmp", manifest::NAME, "lock", VIEW].contains(&top.as_str()))
+    (WORKING.contains(&top.as_str()) || [WORK, "out.tmp", manifest::NAME, "lock", VIEW, super::labels::DIR].contains(&top.as_str()))
         || OUTPUTS.contains(&top.as_str())
         || top.strip_prefix("lock.").is_some_and(|i| i.parse::<u32>().is_ok())
 }

@@ -35,6 +35,7 @@
 //!   stage's, one file per growth block; `work/finished/`: the curves a batch at a time; each
 //!   file a record of the codec (see `codec.rs`: a header with the kind of record, a format
 //!   number and a CRC-32, then a zstd payload);
+//! - `labels/`: the inputs' points labelled by the curves, with `--label-points` (`labels.rs`);
 //! - `lock`, and `lock.<i>` for worker `i` of several sharing the run ([`run_worker`]), removed
 //!   when the run ends, finished, failed or interrupted.
 //!
@@ -67,6 +68,7 @@ mod curves;
 pub(crate) mod far;
 mod grow;
 mod inputs;
+mod labels;
 mod layout;
 mod manifest;
 pub(crate) mod pass;
@@ -80,9 +82,10 @@ mod tile_passes;
 mod types;
 
 pub(crate) use bucket::Input;
+pub use labels::DIR as LABELS;
 pub use layout::{write_view, OUTPUTS};
 pub use manifest::{InputStamp, Job, Manifest, NAME as MANIFEST};
-pub use status::{render_status, status, Status};
+pub use status::{render_status, status, PieceCounts, Status};
 pub use types::{check_threads, Extraction, PassSeconds, ProjectionCost, Report, RunOptions, ShapeCounts, Worker, WorkerStep, MAX_THREADS_PER_CORE};
 
 use crate::curves::{Curves, Outside};
@@ -196,6 +199,7 @@ fn extract_files(mut run: Run, mut found: InputFiles, params: &Params, filter: &
     let stage = done!(run.curves(&r, &outside)?);
     found.warnings.extend(clusters_cut_warning(&stage.counts));
     let shapes = run.write(stage.batches, &found.crs, &r)?;
+    run.labels = run.label_points(stage.batches, &r, &found.files, filter.text)?;
     found.warn_coarse_coordinates(&run.manifest.grid, r.kappa);
     let report = report(&mut run, found, r, stage, outside, shapes);
     run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
@@ -255,6 +259,7 @@ fn report(run: &mut Run, found: InputFiles, r: Resolved, stage: CurveStage, outs
         crs: found.crs,
         outside,
         shapes,
+        labels: std::mem::take(&mut run.labels),
     }
 }
 

@@ -125,7 +125,7 @@ fn plan_anew(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Boun
     };
     // (Working data at the top is that of a run of the older layout.)
     remove_working_data(ws);
-    for name in [VIEW].into_iter().chain(OUTPUTS) {
+    for name in [VIEW, super::labels::DIR].into_iter().chain(OUTPUTS) {
         ws.remove(name);
     }
     let (b, declared) = bounds()?;

@@ -75,6 +75,8 @@ pub(super) struct Run<'a> {
     pub(super) repaired: Vec<PathBuf>,
     /// This process's share of a run that several share.
     pub(super) worker: Option<Worker>,
+    /// The labelled copies of the inputs the label pass wrote or found.
+    pub(super) labels: Vec<PathBuf>,
 }
 
 /// The manifest a run starts from, as the plan step left it, and whether the run resumes.
@@ -106,6 +108,7 @@ impl<'a> Run<'a> {
             curve_peak: None,
             repaired: vec![],
             worker,
+            labels: vec![],
         }
     }
 

@@ -30,6 +30,10 @@ pub struct Status {
     pub work_dir: Option<PathBuf>,
     /// The working data was removed once the outputs were written.
     pub cleaned: bool,
+    /// Once the outputs are written: the curves' typed pieces by kind.
+    pub pieces: Option<PieceCounts>,
+    /// The labelled copies of the inputs in the run directory (`--label-points`).
+    pub labels: Vec<PathBuf>,
     /// One-line summary.
     pub summary: String,
 }
@@ -82,8 +86,83 @@ pub fn status(dir: &Path) -> Result<Status> {
         finished: m.finished,
         work_dir: m.work_dir.clone(),
         cleaned: m.cleaned,
+        pieces: if m.finished { piece_counts(dir, m.resolved.as_ref())? } else { None },
+        labels: labelled_copies(dir),
         summary,
     })
+}
+
+/// A run's curves as typed pieces ([`crate::curves::typed`]), counted by kind.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PieceCounts {
+    /// Curves.
+    pub curves: u64,
+    /// Line segments.
+    pub lines: u64,
+    /// Circular arcs.
+    pub arcs: u64,
+    /// Whole circles.
+    pub circles: u64,
+    /// Runs of the polyline no line or arc fits within the tolerance.
+    pub polylines: u64,
+}
+
+impl PieceCounts {
+    fn add(&mut self, kind: &str) {
+        match kind {
+            "line" => self.lines += 1,
+            "arc" => self.arcs += 1,
+            "circle" => self.circles += 1,
+            _ => self.polylines += 1,
+        }
+    }
+}
+
+/// The typed pieces of a finished run's curves, by kind: those of `curves.json` if it was
+/// written, else those of the curves in `curves.ply` (or `curves.obj`) at the run's tolerance;
+/// None if the run wrote none of these.
+fn piece_counts(dir: &Path, r: Option<&crate::extract::Resolved>) -> Result<Option<PieceCounts>> {
+    use crate::curves::typed;
+    let mut n = PieceCounts::default();
+    let json = dir.join("curves.json");
+    if let Ok(bytes) = std::fs::read(&json) {
+        let v: serde_json::Value = serde_json::from_slice(&bytes).map_err(|e| Error::input(&json, format!("unreadable curves.json: {e}")))?;
+        let pieces = v["pieces"].as_array().map_or(&[][..], |a| &a[..]);
+        let mut curves = std::collections::BTreeSet::new();
+        for p in pieces {
+            n.add(p["kind"].as_str().unwrap_or(""));
+            curves.insert(p["curve"].as_u64());
+        }
+        n.curves = curves.len() as u64;
+        return Ok(Some(n));
+    }
+    let Some(r) = r else { return Ok(None) };
+    let curves = if dir.join("curves.ply").is_file() {
+        crate::curves::read_ply(&dir.join("curves.ply"))?
+    } else if dir.join("curves.obj").is_file() {
+        crate::curves::read_obj(&dir.join("curves.obj"))?
+    } else {
+        return Ok(None);
+    };
+    let tol = typed::tolerance(r.kappa, r.noise);
+    for c in &curves {
+        typed::pieces(c, tol).iter().for_each(|p| n.add(p.kind.name()));
+    }
+    n.curves = curves.len() as u64;
+    Ok(Some(n))
+}
+
+/// The labelled copies in a run directory, by name.
+fn labelled_copies(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir.join(super::labels::DIR))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "laz" || x == "ply"))
+        .collect();
+    files.sort();
+    files
 }
 
 /// Formats a status for humans.
@@ -103,6 +182,13 @@ pub fn render_status(s: &Status) -> String {
         out += &format!("  curves     {done}/{n} growth blocks\n");
     }
     out += &format!("  outputs    {}\n", if s.finished { "written" } else { "not yet" });
+    if let Some(p) = &s.pieces {
+        out += &format!("  pieces     {} lines, {} arcs, {} circles, {} polyline runs (of {} curves)\n", p.lines, p.arcs, p.circles, p.polylines, p.curves);
+    }
+    if !s.labels.is_empty() {
+        let copies = if s.labels.len() == 1 { "copy" } else { "copies" };
+        out += &format!("  labels     {} labelled {copies} in {}/\n", s.labels.len(), super::labels::DIR);
+    }
     if let Some(w) = s.work_dir.as_ref().filter(|_| !s.cleaned) {
         out += &format!("  work dir   {}\n", w.display());
     }

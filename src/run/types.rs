@@ -47,6 +47,9 @@ pub struct RunOptions {
     pub recursive: bool,
     /// The curve files written (an output setting).
     pub formats: Vec<Format>,
+    /// Also writes a copy of each input file's points labelled by the curves (`--label-points`;
+    /// an output setting): see [`crate::io::write_labelled`].
+    pub label_points: bool,
     /// Where the working data (the tile store and the per-tile results, most of a run's disk
     /// use) goes, if not in the run directory; a resumed run keeps the one it started with.
     pub work_dir: Option<PathBuf>,
@@ -78,6 +81,7 @@ impl Default for RunOptions {
             outside: None,
             recursive: false,
             formats: Format::DEFAULT.to_vec(),
+            label_points: false,
             work_dir: None,
             clean: false,
             block_steps: crate::extract::blocks::BASE_STEPS,
@@ -228,6 +232,9 @@ pub struct Report {
     pub outside: Outside,
     /// Curves written, by shape.
     pub shapes: ShapeCounts,
+    /// The labelled copies of the inputs (`--label-points`), if asked for.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub labels: Vec<PathBuf>,
     /// What stage 2 cost per point it worked on: its seconds per candidate and per edge point
     /// found, in microseconds (the projection model's cost, whatever the cloud's size).
     pub projection_cost: ProjectionCost,
@@ -298,6 +305,8 @@ pub struct PassSeconds {
     pub projection_load: f64,
     /// Writing outputs.
     pub writing: f64,
+    /// Writing the labelled copies of the inputs (`--label-points`).
+    pub labelling: f64,
 }
 
 /// The result of an in-memory extraction.

@@ -139,8 +139,16 @@ fn near_copies_are_collapsed_and_counted() {
     let d = tempfile::tempdir().unwrap();
     let (cube, _) = plain_cube(d.path());
     let spacing = (6.0 / cube.len() as f64).sqrt();
-    let mut rng = crease::rng::Rng::stream(3, 0);
-    let mut jitter = || 1e-4 * spacing * (2.0 * rng.f64() - 1.0);
+    // (A splitmix64 stream: any spread of signs and sizes within the bound will do.)
+    let mut state = 3u64;
+    let mut jitter = || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        let unit = (z ^ (z >> 31)) as f64 / u64::MAX as f64;
+        1e-4 * spacing * (2.0 * unit - 1.0)
+    };
     let twice: Vec<DVec3> = cube.iter().copied().chain(cube.iter().map(|&p| p + DVec3::new(jitter(), jitter(), jitter()))).collect();
     let p = d.path().join("twice.ply");
     let mut w = crease::io::PointWriter::create(&p, &crease::io::WriteOptions { scale: 1e-12, offset: DVec3::ZERO, epsg: None }).unwrap();

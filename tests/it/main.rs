@@ -11,6 +11,7 @@ mod crs;
 mod dirty;
 mod e57;
 mod extract;
+mod labels;
 mod ply_and_curves;
 mod real_files;
 mod synth;
