@@ -50,7 +50,9 @@ for run in "$@"; do
       [ "$gdal_name" = "$name" ] || verdict=FAIL
       crs="\"$gdal_name\" (run: \"$name\", no code)"
     else
-      crs="\"$gdal_name\" (run: none; GDAL's default)"
+      # (A run without a CRS must not be read as WGS 84: GDAL should see an unknown local one.)
+      [ "$gdal_name" = unknown ] || verdict=FAIL
+      crs="\"$gdal_name\" (run: none)"
     fi
     # (A run without curves has no fields to show; GeoPackage keeps the id as its FID.)
     want=9; [ "$ext" = gpkg ] && want=8; [ "$curves" = 0 ] && want=0

@@ -17,6 +17,11 @@ use serde_json::{json, Value};
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
+/// The CRS named when the input has none: a local engineering CRS of unknown unit. A GeoJSON
+/// without a `crs` member is WGS 84 to GDAL and QGIS, which would put a part measured in
+/// millimetres at longitude and latitude; this one they read as unknown and leave unplaced.
+pub(crate) const UNKNOWN_CRS: &str = r#"LOCAL_CS["unknown",UNIT["unknown",1],AXIS["Easting",EAST],AXIS["Northing",NORTH]]"#;
+
 /// Writes `curves` to `path` as a GeoJSON FeatureCollection (`tol`: the tolerance of the typed
 /// pieces that name each curve's kind, see `typed::tolerance`).
 pub fn write_geojson(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
@@ -29,7 +34,7 @@ pub fn write_geojson(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, to
     let name = match (crs.epsg, &crs.wkt) {
         (Some(code), _) => Some(format!("urn:ogc:def:crs:EPSG::{code}")),
         (None, Some(wkt)) => Some(wkt.clone()),
-        (None, None) => None,
+        (None, None) => Some(UNKNOWN_CRS.to_string()),
     };
     if let Some(name) = name {
         head.insert("crs".into(), json!({"type": "name", "properties": {"name": name}}));

@@ -14,7 +14,7 @@
 //!   `id`, `closed`, `length`, `confidence`, `angle`, `shape`, `start` and `end` (`corner`,
 //!   `free` or `closed`), `corners` (indices of corner vertices, as text). The CRS is named with
 //!   the `crs` member, which GDAL reads: the EPSG URN, or the WKT when the CRS has no code; the
-//!   full WKT is also in `crs_wkt`, the units in `crs_units`. Without a CRS, GDAL assumes WGS 84.
+//!   full WKT is also in `crs_wkt`, the units in `crs_units`. Without a CRS it names a local CRS of unknown unit, which GDAL reads as unknown rather than as WGS 84.
 //!   Also `kind`, what the curve is as typed pieces (`typed`): `line`, `arc`, `circle` or
 //!   `polyline` where all its pieces are of that kind, `mixed` where they differ; and `radius`,
 //!   where it is one arc or one circle (else null).

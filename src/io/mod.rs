@@ -30,13 +30,15 @@
 //! files that disagree on the CRS are refused.
 
 mod e57;
+mod label;
 mod labels;
 mod las;
 mod ply;
 mod text;
 mod write;
 
-pub use labels::{labelled_extension, write_labelled, Label, Labeller, LABEL_CHUNK, LABEL_FIELDS};
+pub use label::{Label, Labeller, LABEL_CHUNK, LABEL_FIELDS};
+pub use labels::{labelled_extension, write_labelled};
 pub use text::TextColumns;
 pub use write::{PointWriter, WriteOptions};
 

@@ -429,7 +429,7 @@ impl PlyReader {
     /// The header of the labelled copy: the vertex element's properties followed by the
     /// labels'. Refused if the vertices already have a property of a label's name.
     fn labelled_header(&self) -> Result<Vec<u8>> {
-        if let Some(p) = self.vertex.props.iter().find(|p| super::labels::LABEL_FIELDS.contains(&p.name.as_str())) {
+        if let Some(p) = self.vertex.props.iter().find(|p| super::label::LABEL_FIELDS.contains(&p.name.as_str())) {
             return Err(bad(&self.path, format!("already has a vertex property named {}, which the labelled copy would add", p.name)));
         }
         let text = std::str::from_utf8(&self.map[..self.body]).map_err(|_| bad(&self.path, "PLY header is not text"))?;
@@ -464,7 +464,7 @@ fn skip_space(map: &[u8], mut pos: usize) -> usize {
 /// header with the label properties added to the vertex element, then its data, each vertex
 /// followed by its labels (in binary, in the file's byte order; in ascii, as three more values
 /// on its line). Returns the number of vertices.
-pub(super) fn label_ply(input: &Path, output: &Path, labeller: &dyn super::Labeller, cancel: &crate::cancel::Cancel) -> Result<u64> {
+pub(super) fn label_ply(input: &Path, output: &Path, labeller: &dyn super::label::Labeller, cancel: &crate::cancel::Cancel) -> Result<u64> {
     use std::io::Write;
     let mut r = PlyReader::open(input)?;
     let out = |e| Error::output(output, e);
@@ -479,7 +479,7 @@ pub(super) fn label_ply(input: &Path, output: &Path, labeller: &dyn super::Label
     // (An ascii vertex line ends as the header's lines do.)
     let eol = if r.map[..r.body].ends_with(b"\r\n") { "\r\n" } else { "\n" };
     let (mut xyz, mut spans, mut labels, mut bytes) = (vec![], vec![], vec![], vec![]);
-    while r.read_spans(super::labels::LABEL_CHUNK, &mut xyz, &mut spans)? > 0 {
+    while r.read_spans(super::label::LABEL_CHUNK, &mut xyz, &mut spans)? > 0 {
         cancel.check()?;
         labeller.label(&xyz, &mut labels);
         bytes.clear();

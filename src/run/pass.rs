@@ -1,7 +1,7 @@
 //! The tile pass engine: every tile without a result goes through `load` then `compute`, in
 //! order, and its result is stored atomically; and the loading of a tile with its halo.
 
-use super::records::{self, Record};
+use super::records::{self, Dropped, Record};
 use crate::cancel::Cancel;
 use crate::error::{Error, Result};
 use crate::extract::neighbourhood::Cloud;
@@ -119,15 +119,6 @@ pub(crate) struct Loading<'a> {
     /// Radius within which near duplicates are collapsed (0: exact copies only; see
     /// [`Resolved::near`](crate::extract::Resolved::near)).
     pub near: f64,
-}
-
-/// How many of a tile's own points were dropped as copies of others as it was loaded.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub(crate) struct Dropped {
-    /// At the very position of another.
-    pub exact: u64,
-    /// Within the near-duplicate radius of another (see [`Loading::near`]).
-    pub near: u64,
 }
 
 /// Loads tile `t`'s core and the halo around it (thinned to share `keep` by position key, each

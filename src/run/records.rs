@@ -2,7 +2,6 @@
 //! records of the codec (see [`crate::codec`]): one file a tile (or block) and pass,
 //! `<dir>/<number>.bin`, written atomically.
 
-use super::pass::Dropped;
 use crate::codec::{self, Reader, Writer};
 use crate::curves::{Polyline, Shape, Vertex};
 use crate::error::{Error, Result};
@@ -56,6 +55,15 @@ fn decode_all<R: Record>(raw: &[u8], path: &Path) -> Result<R> {
     let rec = R::decode(&mut r)?;
     r.finish()?;
     Ok(rec)
+}
+
+/// How many of a tile's own points were dropped as copies of others as it was loaded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Dropped {
+    /// At the very position of another.
+    pub exact: u64,
+    /// Within the near-duplicate radius of another (see `pass::Loading::near`).
+    pub near: u64,
 }
 
 /// The statistics of a tile's sampled points, in global id order, and the copies of the tile's

@@ -170,6 +170,11 @@ fn geojson_carries_crs_and_coordinates() {
     write_geojson(&p, &sample_curves(), &wkt_only, 1e-6).unwrap();
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     assert_eq!(v["crs"]["properties"]["name"], "PROJCS[\"NAD83_2011_Nebraska_ft\"]");
+    // Without any CRS, a local one of unknown unit: a GeoJSON that names none is WGS 84 to GDAL.
+    write_geojson(&p, &sample_curves(), &crease::points::Crs::default(), 1e-6).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    let name = v["crs"]["properties"]["name"].as_str().unwrap();
+    assert!(name.starts_with("LOCAL_CS[\"unknown\"") && name.contains("UNIT[\"unknown\",1]"), "{name}");
 }
 
 /// Curve PLYs of older layouts still read: without the shape (crease 0.7), each curve's shape
