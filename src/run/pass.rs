@@ -255,13 +255,7 @@ pub(super) fn drop_duplicates(tp: &mut TilePoints, own: std::ops::Range<usize>) 
     for k in copy {
         keep[k as usize] = false;
     }
-    let before = |end: usize| keep[..end].iter().filter(|&&k| k).count();
-    let own = before(own.start)..before(own.end);
-    let mut k = 0;
-    tp.xyz.retain(|_| (keep[k], k += 1).0);
-    k = 0;
-    tp.gid.retain(|_| (keep[k], k += 1).0);
-    own
+    retain_kept(tp, &keep, own)
 }
 
 /// Drops every point of `tp` within `radius` of another with a smaller global id (copies
@@ -305,6 +299,12 @@ fn drop_near(tp: &mut TilePoints, own: std::ops::Range<usize>, radius: f64, insi
     for (k, p) in xyz.iter().enumerate() {
         keep[k] &= own.contains(&k) || inside(*p);
     }
+    retain_kept(tp, &keep, own)
+}
+
+/// Keeps the points of `tp` that `keep` flags, in order; returns where the tile's own points,
+/// `own` before, now are.
+fn retain_kept(tp: &mut TilePoints, keep: &[bool], own: std::ops::Range<usize>) -> std::ops::Range<usize> {
     let before = |end: usize| keep[..end].iter().filter(|&&k| k).count();
     let own = before(own.start)..before(own.end);
     let mut k = 0;
