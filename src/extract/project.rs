@@ -617,13 +617,22 @@ fn solve(xs: &[DVec3], centre: DVec3, found: Found, pts: &[DVec3], reach: f64, p
                 refined.push((nearest, chosen));
                 refined.len() - 1
             });
-            finish(x, &refined[at].1, lone_split, base, pts, reach, p)
+            finish(x, &refined[at].1, lone_split, base, Ball { pts, reach }, p)
         })
         .collect()
 }
 
-/// The edge (and corner) point of `x` on the refined surfaces `surfaces` (nearest first).
-fn finish(x: DVec3, surfaces: &[Surface], lone_split: bool, mut out: Projected, pts: &[DVec3], reach: f64, p: &ProjectParams) -> Projected {
+/// A candidate's neighbourhood: its points, and how far the farthest lies from its centre.
+#[derive(Clone, Copy)]
+struct Ball<'a> {
+    pts: &'a [DVec3],
+    reach: f64,
+}
+
+/// The edge (and corner) point of `x` on the refined surfaces `surfaces` (nearest first) in
+/// the neighbourhood `ball`.
+fn finish(x: DVec3, surfaces: &[Surface], lone_split: bool, mut out: Projected, ball: Ball, p: &ProjectParams) -> Projected {
+    let Ball { pts, reach } = ball;
     let tol = 1e-7 * p.radius;
     if surfaces[..2].iter().any(|sf| sf.too_rough(p.max_rms)) {
         out.scattered = true;

@@ -282,7 +282,7 @@ pub(crate) fn tile_statistics(
     let mut todo: Option<Vec<u64>> = None;
     let mut done: Vec<(u64, PointStats)> = Vec::new();
     loop {
-        let round = sample_round(&tp, &is_core, todo.as_deref(), reach, tile, halo, cap);
+        let round = sample_round((&tp, &is_core), todo.as_deref(), reach, tile, halo, cap);
         // (A cancelled round skipped its samples: what it says is not to be used.)
         tile.cancel.check()?;
         done.extend(round.done);
@@ -319,7 +319,7 @@ struct Round {
 
 /// Computes the samples of the tile (those in `todo`, if given) with the points within `reach`
 /// of a sample indexed (all of them for None), the tile being loaded with `halo`.
-fn sample_round(tp: &TilePoints, is_core: &[bool], todo: Option<&[u64]>, reach: Option<f64>, tile: &StatsTile, halo: f64, cap: f64) -> Round {
+fn sample_round((tp, is_core): (&TilePoints, &[bool]), todo: Option<&[u64]>, reach: Option<f64>, tile: &StatsTile, halo: f64, cap: f64) -> Round {
     // (Sampled by world position, read from the store, not rebuilt from the tile's
     // local coordinates, whose round trip may not be exact.)
     let sampled: Vec<bool> = tp
