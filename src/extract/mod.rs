@@ -71,7 +71,7 @@ pub struct Counts {
     #[serde(default)]
     pub exact_duplicates: u64,
     /// Points dropped as near copies of another (within a small share of the spacing, see
-    /// [`statistics::NEAR_DUPLICATE`]): counted in `points`, left out as the exact ones are.
+    /// `statistics::NEAR_DUPLICATE`): counted in `points`, left out as the exact ones are.
     #[serde(default)]
     pub near_duplicates: u64,
     /// Points at which stages 1-2 were evaluated (fewer than the input where a noisy cloud is

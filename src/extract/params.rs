@@ -129,7 +129,7 @@ pub struct Resolved {
     #[serde(default)]
     pub model: Model,
     /// Radius within which near duplicates are collapsed as the tiles are loaded (0: exact
-    /// copies only; see [`super::statistics::near_duplicate_radius`]). Written only where the
+    /// copies only; see `statistics::near_duplicate_radius`). Written only where the
     /// cloud has them, so that a clean cloud's files read as before.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub near: f64,

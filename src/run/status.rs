@@ -92,7 +92,7 @@ pub fn status(dir: &Path) -> Result<Status> {
     })
 }
 
-/// A run's curves as typed pieces ([`crate::curves::typed`]), counted by kind.
+/// A run's curves as typed pieces (`curves::typed`), counted by kind.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct PieceCounts {
     /// Curves.
