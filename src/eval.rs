@@ -13,7 +13,7 @@
 //!   any other feature (see [`EvalOptions::resolvable`]), so that targets can be stated honestly
 //!   where features lie closer together than the noise lets any method separate them.
 
-use crate::curves::Polyline;
+use crate::curves::{segment_distance, Polyline};
 use crate::points::Bounds;
 use crate::spatial::Index;
 use glam::DVec3;
@@ -119,12 +119,6 @@ fn densify(curves: &[Polyline], step: f64) -> Dense {
     d
 }
 
-fn point_segment(p: DVec3, a: DVec3, b: DVec3) -> f64 {
-    let ab = b - a;
-    let t = if ab.length_squared() > 0.0 { ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
-    p.distance(a + ab * t)
-}
-
 /// Distance from every sample of `from` to the polylines of `to`.
 fn distances(from: &Dense, to: &Dense, origin: DVec3) -> Vec<f64> {
     let local: Vec<[f32; 3]> = to.pts.iter().map(|p| (*p - origin).as_vec3().to_array()).collect();
@@ -140,10 +134,10 @@ fn distances(from: &Dense, to: &Dense, origin: DVec3) -> Vec<f64> {
                 let i = i as usize;
                 best = best.min(p.distance(to.pts[i]));
                 if to.link[i] {
-                    best = best.min(point_segment(*p, to.pts[i], to.pts[i + 1]));
+                    best = best.min(segment_distance(*p, to.pts[i], to.pts[i + 1]));
                 }
                 if i > 0 && to.link[i - 1] {
-                    best = best.min(point_segment(*p, to.pts[i - 1], to.pts[i]));
+                    best = best.min(segment_distance(*p, to.pts[i - 1], to.pts[i]));
                 }
             }
             best

@@ -66,6 +66,14 @@ pub use shape::{Outside, Shape};
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
+/// Distance of `p` from the segment `a`-`b` (from `a` where the segment has no length).
+pub(crate) fn segment_distance(p: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    p.distance(a + t * ab)
+}
+
 /// The curve file formats a run can write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]

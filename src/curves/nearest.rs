@@ -27,10 +27,7 @@ struct Segment {
 
 impl Segment {
     fn distance(&self, q: DVec3) -> f64 {
-        let ab = self.b - self.a;
-        let len2 = ab.length_squared();
-        let t = if len2 > 0.0 { ((q - self.a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
-        q.distance(self.a + t * ab)
+        super::segment_distance(q, self.a, self.b)
     }
 }
 

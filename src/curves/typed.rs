@@ -110,17 +110,10 @@ fn off_circle(p: DVec3, centre: DVec3, axis: DVec3, r: f64) -> f64 {
     (radial * radial + h * h).sqrt()
 }
 
-/// Distance of `p` from the segment `a`-`b`.
-fn off_segment(p: DVec3, a: DVec3, b: DVec3) -> f64 {
-    let ab = b - a;
-    let t = if ab.length_squared() > 0.0 { ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
-    p.distance(a + t * ab)
-}
-
 /// Largest distance of `pts` from the segment between their ends.
 fn line_error(pts: &[DVec3]) -> f64 {
     let (a, b) = (pts[0], pts[pts.len() - 1]);
-    pts.iter().map(|&p| off_segment(p, a, b)).fold(0.0, f64::max)
+    pts.iter().map(|&p| crate::curves::segment_distance(p, a, b)).fold(0.0, f64::max)
 }
 
 /// The arc through the ends of `pts` and their middle vertex, if every vertex lies within
@@ -390,7 +383,7 @@ mod tests {
             assert_eq!(p.end, span[p.segments]);
             for &q in &span {
                 let d = match p.kind {
-                    Kind::Line => off_segment(q, p.start, p.end),
+                    Kind::Line => crate::curves::segment_distance(q, p.start, p.end),
                     Kind::Arc | Kind::Circle => off_circle(q, p.centre.unwrap(), p.axis.unwrap(), p.radius.unwrap()),
                     Kind::Polyline => 0.0,
                 };
