@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Typed curves on a corpus of machined parts: the share of truth edges recovered as one piece of
 the right type (a line between the edge's ends; a circle, or an arc between the edge's ends, of
-its centre, axis and radius), the
+its centre, axis and radius; a spline for a free-form edge: an ellipse, a B-spline or other), the
 circles' radius error, and the pieces written against the truth's edge count.
 
 A corpus is a folder of NAME.off meshes with NAME.truth.obj and NAME.json (its `edges` give
@@ -14,7 +14,7 @@ scripts/corpus.py (the same cache folder).
 An edge counts as recovered when one piece of its kind holds all of it within TOL dB: a line
 segment within TOL of the edge's ends and middle; a circle (for an open circular edge, an arc or a
 circle) whose centre and radius are within TOL of the edge's, whose axis is within 5 degrees of
-it, and whose sweep holds the edge's points. A piece may run on past the edge's ends: a B-rep
+it, and whose sweep holds the edge's points; a spline within TOL of nine points along the edge. A piece may run on past the edge's ends: a B-rep
 splits a rim or a line at vertices the surface does not show.
 """
 import json
@@ -69,6 +69,29 @@ def on_arc(p, piece, tol):
     return ang <= math.radians(piece["sweep_deg"]) + slack or ang >= 2 * math.pi - slack
 
 
+def de_boor(degree, knots, ctrl, t):
+    k = max(j for j in range(degree, len(ctrl)) if knots[j] <= t)
+    d = [list(ctrl[j + k - degree]) for j in range(degree + 1)]
+    for r in range(1, degree + 1):
+        for j in range(degree, r - 1, -1):
+            lo, hi = knots[j + k - degree], knots[j + 1 + k - r]
+            a = (t - lo) / (hi - lo) if hi > lo else 0.0
+            d[j] = [(1 - a) * x + a * y for x, y in zip(d[j - 1], d[j])]
+    return d[degree]
+
+
+def drawn(piece, n=400):
+    """A spline piece as n + 1 points from its start to its end."""
+    if "_drawn" not in piece:
+        deg, knots, ctrl = piece["degree"], piece["knots"], piece["control_points"]
+        a, b = knots[deg], knots[len(ctrl)]
+        piece["_drawn"] = [de_boor(deg, knots, ctrl, a + (b - a) * i / n) for i in range(n + 1)]
+    return piece["_drawn"]
+
+
+FREE_FORM = ("ellipse", "bspline", "other")
+
+
 def matches(edge, poly, piece, tol):
     """A piece of the edge's kind that holds the whole edge within tol (it may run on past the
     edge's ends, where the part has a B-rep vertex that the scan does not show)."""
@@ -76,6 +99,10 @@ def matches(edge, poly, piece, tol):
         return all(off_segment(p, piece["start"], piece["end"]) <= tol for p in (poly[0], poly[len(poly) // 2], poly[-1]))
     # (A truth circle that is not closed is an arc, held by an arc or a circle; a closed one
     # only by a circle.)
+    if edge["kind"] in FREE_FORM and piece["kind"] == "spline":
+        d = drawn(piece)
+        near = lambda p: min(off_segment(p, d[i], d[i + 1]) for i in range(len(d) - 1)) <= tol
+        return all(near(poly[round(i * (len(poly) - 1) / 8)]) for i in range(9))
     if edge["kind"] == "circle" and piece["kind"] in (("circle",) if edge["closed"] else ("arc", "circle")):
         ax, pax = edge["axis"], piece["axis"]
         cos = abs(sum(x * y for x, y in zip(ax, pax))) / (math.hypot(*ax) * math.hypot(*pax))
@@ -96,10 +123,11 @@ def main():
         sys.exit(f"typed-curves.py: no NAME.off with NAME.json and NAME.truth.obj in {args.corpus}")
     print(f"{len(parts)} parts, {args.points} points; edges recovered as one piece of their type within {args.tol} dB")
     print()
-    print("| noise | lines | circles and arcs | all typed edges | circle radius error, median (share of r) | pieces / truth edges |")
-    print("|---|---|---|---|---|---|")
+    print("| noise | lines | circles and arcs | free-form as splines | all typed edges | circle radius error, median (share of r) | pieces / truth edges | pieces by kind |")
+    print("|---|---|---|---|---|---|---|---|")
     for level in args.levels.split():
-        found = {"line": [0, 0], "circle": [0, 0]}
+        found = {"line": [0, 0], "circle": [0, 0], "free": [0, 0]}
+        kinds = {}
         radius_errors, piece_counts, edge_counts = [], 0, 0
         for off in parts:
             name = f"{off.parent.name}_{off.stem}"
@@ -115,15 +143,18 @@ def main():
             lines = truth_lines(off.with_suffix("").with_suffix(".truth.obj"))
             piece_counts += len(pieces)
             edge_counts += len(meta["edges"])
-            part_found = {"line": [0, 0], "circle": [0, 0]}
+            for p in pieces:
+                kinds[p["kind"]] = kinds.get(p["kind"], 0) + 1
+            part_found = {"line": [0, 0], "circle": [0, 0], "free": [0, 0]}
             for edge in meta["edges"]:
-                if edge["kind"] not in found:
+                group = "free" if edge["kind"] in FREE_FORM else edge["kind"]
+                if group not in found:
                     continue
                 poly = lines[edge["obj_line"] - 1]
                 hit = [p for p in pieces if matches(edge, poly, p, tol)]
-                part_found[edge["kind"]][1] += 1
+                part_found[group][1] += 1
                 if hit:
-                    part_found[edge["kind"]][0] += 1
+                    part_found[group][0] += 1
                     if edge["kind"] == "circle":
                         best = min(hit, key=lambda p: abs(p["radius"] - edge["radius"]))
                         radius_errors.append(abs(best["radius"] - edge["radius"]) / edge["radius"])
@@ -131,14 +162,16 @@ def main():
                 found[k][0] += part_found[k][0]
                 found[k][1] += part_found[k][1]
             print(f"  {name} {level}: lines {part_found['line'][0]}/{part_found['line'][1]}, circles "
-                  f"{part_found['circle'][0]}/{part_found['circle'][1]}, {len(pieces)} pieces for "
+                  f"{part_found['circle'][0]}/{part_found['circle'][1]}, free-form "
+                  f"{part_found['free'][0]}/{part_found['free'][1]}, {len(pieces)} pieces for "
                   f"{len(meta['edges'])} edges", file=sys.stderr, flush=True)
         share = lambda k: f"{found[k][0] / found[k][1]:.3f} ({found[k][0]} of {found[k][1]})" if found[k][1] else "-"
         both = [found["line"][0] + found["circle"][0], found["line"][1] + found["circle"][1]]
         label = f"{level[1:]} spacings" if level.startswith("k") else ("none" if level == "0" else f"{level} dB")
         rerr = f"{statistics.median(radius_errors):.4f}" if radius_errors else "-"
-        print(f"| {label} | {share('line')} | {share('circle')} | {both[0] / max(both[1], 1):.3f} | {rerr} | "
-              f"{piece_counts / max(edge_counts, 1):.2f} |")
+        by_kind = ", ".join(f"{kinds[k]} {k}" for k in sorted(kinds))
+        print(f"| {label} | {share('line')} | {share('circle')} | {share('free')} | {both[0] / max(both[1], 1):.3f} | {rerr} | "
+              f"{piece_counts / max(edge_counts, 1):.2f} | {by_kind} |")
 
 
 if __name__ == "__main__":

@@ -585,7 +585,7 @@ impl Curve {
         self.c().end_kinds()[1]
     }
 
-    /// `line`, `arc`, `circle`, `polyline` or `mixed`, from the typed pieces (None if their
+    /// `line`, `arc`, `circle`, `spline`, `polyline` or `mixed`, from the typed pieces (None if their
     /// tolerance is not known).
     #[getter]
     fn kind(&self) -> Option<&'static str> {

@@ -1,7 +1,8 @@
 //! DXF output for CAD tools: each curve as its typed pieces (see [`super::typed`]), the entity
 //! a CAD user draws and snaps to: a LINE on layer `crease_lines`, an ARC on `crease_arcs`, a
-//! CIRCLE on `crease_circles`, and a run that no line or arc fits a 3D POLYLINE on
-//! `crease_curves` (where every curve was before the pieces were typed). Pieces come in curve id
+//! CIRCLE on `crease_circles`, a run that no line or arc fits a cubic SPLINE on
+//! `crease_splines` (its knots and control points, clamped), and a run no spline holds either
+//! a 3D POLYLINE on `crease_curves`. Pieces come in curve id
 //! order, each curve's in order along it; each corner is a POINT on layer `crease_corners`.
 //!
 //! The curves' plain polylines are not written besides: each edge would be drawn twice, and a
@@ -15,14 +16,14 @@
 //! Each entity carries its curve's attributes (the GeoPackage's columns) as extended data of
 //! the application `CREASE`: each a name (code 1000) followed by its value (1071 for the id,
 //! 1070 for `closed`, 1040 for lengths, angles, the confidence and the radius, 1000 for text);
-//! an angle that is not known is left out. Then the piece's `kind` (`line`, `arc`, `circle` or
-//! `polyline`) and, for an arc or a circle, its `radius`.
+//! an angle that is not known is left out. Then the piece's `kind` (`line`, `arc`, `circle`,
+//! `spline` or `polyline`) and, for an arc or a circle, its `radius`.
 
 use super::typed::{self, Kind, Piece};
 use super::{Curves, Polyline};
 use crate::crs::Crs;
 use crate::error::{Error, Result};
-use dxf::entities::{Arc, Circle, Entity, EntityType, Line, ModelPoint, Polyline as DxfPolyline, Vertex as DxfVertex};
+use dxf::entities::{Arc, Circle, Entity, EntityType, Line, ModelPoint, Polyline as DxfPolyline, Spline as DxfSpline, Vertex as DxfVertex};
 use dxf::tables::{AppId, Layer};
 use dxf::{Drawing, Point, Vector, XData, XDataItem};
 use glam::DVec3;
@@ -31,6 +32,7 @@ use std::path::Path;
 const LINES: &str = "crease_lines";
 const ARCS: &str = "crease_arcs";
 const CIRCLES: &str = "crease_circles";
+const SPLINES: &str = "crease_splines";
 const CURVES: &str = "crease_curves";
 const CORNERS: &str = "crease_corners";
 /// The registered application name of the curves' extended data.
@@ -83,7 +85,8 @@ fn ocs_angle(p: DVec3, centre: DVec3, n: DVec3) -> f64 {
 }
 
 /// The DXF entity of piece `p` of curve `c` and its layer; None for an arc or a circle
-/// without its centre, axis and radius (which [`typed::pieces`] always gives them).
+/// without its centre, axis and radius, or a spline without its knots (which
+/// [`typed::pieces`] always gives them).
 fn entity(c: &Polyline, p: &Piece, d: &mut Drawing) -> Option<(EntityType, &'static str)> {
     let point = |v: DVec3| Point::new(v.x, v.y, v.z);
     Some(match p.kind {
@@ -97,6 +100,16 @@ fn entity(c: &Polyline, p: &Piece, d: &mut Drawing) -> Option<(EntityType, &'sta
         Kind::Circle => {
             let (normal, _, center) = plane(p.centre?, p.axis?);
             (EntityType::Circle(Circle { center, radius: p.radius?, normal, ..Default::default() }), CIRCLES)
+        }
+        Kind::Spline => {
+            let s = p.spline.as_ref()?;
+            let spline = DxfSpline {
+                degree_of_curve: s.degree as i32,
+                knot_values: s.knots.clone(),
+                control_points: s.control_points.iter().map(|&v| point(v)).collect(),
+                ..Default::default()
+            };
+            (EntityType::Spline(spline), SPLINES)
         }
         Kind::Polyline => {
             let n = c.vertices.len();
@@ -122,7 +135,7 @@ pub fn write_dxf(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f
     d.header.version = dxf::enums::AcadVersion::R2000;
     // (DXF has no CRS: its summary goes in the drawing's project name.)
     d.header.project_name = crs.summary();
-    for (name, colour) in [(LINES, 7), (ARCS, 3), (CIRCLES, 4), (CURVES, 1), (CORNERS, 5)] {
+    for (name, colour) in [(LINES, 7), (ARCS, 3), (CIRCLES, 4), (SPLINES, 6), (CURVES, 1), (CORNERS, 5)] {
         d.add_layer(Layer { name: name.into(), color: dxf::Color::from_index(colour), ..Default::default() });
     }
     d.add_app_id(AppId { name: APP.into(), ..Default::default() });
@@ -332,5 +345,35 @@ mod tests {
             }
         }
         assert_eq!(seen, [LINES, CURVES, CORNERS]);
+    }
+
+    #[test]
+    fn a_free_form_run_is_a_spline_of_its_pieces_knots_and_control_points() {
+        // A line, a corner, then a twisted cubic: a LINE and a SPLINE that pass through the corner.
+        let mut pl = Polyline::from_points(4, (0..=10).map(|k| DVec3::new(k as f64 / 10.0 - 1.0, 0.0, 0.0)));
+        pl.vertices.extend((1..=200).map(|k| k as f64 / 200.0).map(|x| crate::curves::Vertex::at(DVec3::new(x, x * x * x, 0.5 * x * x))));
+        pl.vertices[10].corner = true;
+        let d = tempfile::tempdir().unwrap();
+        let path = d.path().join("c.dxf");
+        write_dxf(&path, &[pl.clone()], &Crs::default(), 1e-3).unwrap();
+        let pieces = typed::pieces(&pl, 1e-3);
+        let s = pieces[1].spline.as_ref().expect("a spline piece");
+        let splines: Vec<_> = load(&path)
+            .entities()
+            .filter_map(|e| match &e.specific {
+                EntityType::Spline(sp) => Some((sp.clone(), e.common.layer.clone(), value(e, "kind"))),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(splines.len(), 1);
+        let (sp, layer, kind) = &splines[0];
+        assert_eq!((layer.as_str(), kind), (SPLINES, &Some(XDataItem::Str("spline".into()))));
+        assert_eq!(sp.degree_of_curve, 3);
+        assert_eq!(sp.knot_values.len(), s.knots.len());
+        assert!(sp.knot_values.iter().zip(&s.knots).all(|(a, b)| (a - b).abs() < 1e-12));
+        let cp: Vec<DVec3> = sp.control_points.iter().map(|p| DVec3::new(p.x, p.y, p.z)).collect();
+        assert_eq!(cp.len(), s.control_points.len());
+        assert!(cp.iter().zip(&s.control_points).all(|(a, b)| a.distance(*b) < 1e-12));
+        assert_eq!((cp[0], cp[cp.len() - 1]), (DVec3::ZERO, DVec3::new(1.0, 1.0, 0.5)));
     }
 }

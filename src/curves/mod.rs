@@ -15,15 +15,16 @@
 //!   `free` or `closed`), `corners` (indices of corner vertices, as text). The CRS is named with
 //!   the `crs` member, which GDAL reads: the EPSG URN, or the WKT when the CRS has no code; the
 //!   full WKT is also in `crs_wkt`, the units in `crs_units`. Without a CRS it names a local CRS of unknown unit, which GDAL reads as unknown rather than as WGS 84.
-//!   Also `kind`, what the curve is as typed pieces (`typed`): `line`, `arc`, `circle` or
-//!   `polyline` where all its pieces are of that kind, `mixed` where they differ; and `radius`,
+//!   Also `kind`, what the curve is as typed pieces (`typed`): `line`, `arc`, `circle`,
+//!   `spline` or `polyline` where all its pieces are of that kind, `mixed` where they differ; and `radius`,
 //!   where it is one arc or one circle (else null).
 //! - `curves.gpkg`: an OGC GeoPackage, a `curves` table of LineString Z features with the same
 //!   scalar attributes as the GeoJSON, and the CRS (code and WKT) in its spatial reference table.
 //! - `curves.dxf` (AutoCAD 2000): each curve as its typed pieces, in curve id order: a LINE on
 //!   layer `crease_lines`, an ARC on `crease_arcs`, a CIRCLE on `crease_circles` (an arc's or a
-//!   circle's axis its extrusion direction), a run no line or arc fits a 3D POLYLINE on
-//!   `crease_curves`; each corner a POINT on layer `crease_corners`. Each entity carries its
+//!   circle's axis its extrusion direction), a run no line or arc fits a cubic SPLINE on
+//!   `crease_splines` (a 3D POLYLINE on `crease_curves` where no spline holds either); each
+//!   corner a POINT on layer `crease_corners`. Each entity carries its
 //!   curve's attributes as extended data of the application `CREASE`: a name (group code 1000)
 //!   then its value (`id` 1071, `closed` 1070, `length`, `confidence`, `angle` 1040, `shape`,
 //!   `start`, `end`, `corners` 1000), then the piece's `kind` (1000) and an arc's or a circle's
@@ -54,6 +55,7 @@ pub mod nearest;
 mod obj;
 mod ply;
 mod shape;
+pub(crate) mod spline;
 pub(crate) mod typed;
 
 pub use self::dxf::write_dxf;
@@ -87,9 +89,9 @@ pub enum Format {
     Geojson,
     /// OGC GeoPackage (`curves.gpkg`).
     Gpkg,
-    /// DXF lines, arcs, circles and 3D polylines for CAD (`curves.dxf`).
+    /// DXF lines, arcs, circles and splines for CAD (`curves.dxf`).
     Dxf,
-    /// The curves as typed pieces, lines, arcs, circles and polyline runs (`curves.json`).
+    /// The curves as typed pieces, lines, arcs, circles and splines (`curves.json`).
     Json,
 }
 

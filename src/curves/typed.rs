@@ -1,9 +1,11 @@
 //! Typed curves: each curve split at its corners and where its shape changes, each piece the
 //! simplest of a straight line segment, a circular arc and a full circle that holds within a
-//! tolerance over its whole span. What no such fit holds for more than one step stays a
-//! polyline run. A piece starts and ends on vertices of its curve, so pieces that meet share
-//! their end points exactly, corners included.
+//! tolerance over its whole span. What no such fit holds for more than one step is a cubic
+//! B-spline ([`super::spline`]), or, where no spline holds either (a zigzag finer than the
+//! tolerance), stays a polyline run. A piece starts and ends on vertices of its curve, so pieces
+//! that meet share their end points exactly, corners included.
 
+use super::spline::{self, Spline};
 use super::{Curves, Polyline, Shape};
 use crate::crs::Crs;
 use crate::error::{Error, Result};
@@ -23,17 +25,20 @@ pub(crate) enum Kind {
     Arc,
     /// A full circle (a closed curve all on one circle); `start` and `end` are one vertex.
     Circle,
-    /// The curve's own vertices, where no line or arc holds for more than one step.
+    /// A cubic B-spline from `start` to `end`, where no line or arc holds for more than one step.
+    Spline,
+    /// The curve's own vertices, where no spline holds either.
     Polyline,
 }
 
 impl Kind {
-    /// Its name in the outputs: `line`, `arc`, `circle` or `polyline`.
+    /// Its name in the outputs: `line`, `arc`, `circle`, `spline` or `polyline`.
     pub(crate) fn name(self) -> &'static str {
         match self {
             Kind::Line => "line",
             Kind::Arc => "arc",
             Kind::Circle => "circle",
+            Kind::Spline => "spline",
             Kind::Polyline => "polyline",
         }
     }
@@ -74,7 +79,11 @@ pub(crate) struct Piece {
     pub radius: Option<f64>,
     /// Angle an arc sweeps, in degrees (360 for a circle).
     pub sweep_deg: Option<f64>,
-    /// Largest distance of a vertex of its span from it.
+    /// A spline's knots and control points.
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub spline: Option<Spline>,
+    /// Largest distance of a vertex of its span from it (for a spline, of a vertex or a step's
+    /// middle from the spline at the same parameter).
     pub error: f64,
 }
 
@@ -187,6 +196,7 @@ pub(crate) fn pieces(pl: &Polyline, tol: f64) -> Vec<Piece> {
             axis: Some(axis),
             radius: Some(r),
             sweep_deg: Some(360.0),
+            spline: None,
             error,
         }];
     }
@@ -216,14 +226,65 @@ pub(crate) fn pieces(pl: &Polyline, tol: f64) -> Vec<Piece> {
     }
     let mut out = Vec::new();
     for run in &runs {
+        let from = out.len();
         type_run(pl.id, run, &v, tol, &mut out);
+        one_spline_if_simpler(run, &v, tol, &mut out, from);
     }
     out
 }
 
+/// How many numbers a piece takes to write down: a line its two ends, an arc its ends and a
+/// middle point, a spline about four a control point (its point and a knot), a polyline its
+/// vertices.
+fn cost(p: &Piece) -> usize {
+    match p.kind {
+        Kind::Line => 6,
+        Kind::Arc | Kind::Circle => 9,
+        Kind::Spline => p.spline.as_ref().map_or(0, |s| 3 * s.control_points.len() + s.knots.len() - 2 * spline::DEGREE),
+        Kind::Polyline => 3 * (p.segments + 1),
+    }
+}
+
+/// Replaces the pieces `out[from..]` of `run` by one spline through the whole run where that
+/// spline takes fewer numbers to write down: a free-form edge is one spline, not a chain of short
+/// arcs each of which holds only because it is short; a line and an arc that meet tangentially
+/// stay themselves, as no spline holds them that cheaply.
+fn one_spline_if_simpler(run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piece>, from: usize) {
+    let chain = &out[from..];
+    if chain.len() < 2 {
+        return;
+    }
+    let budget: usize = chain.iter().map(cost).sum();
+    // (A spline of c control points costs about 4c numbers: only those under the budget count.)
+    let max_control = (budget / 4).min(MAX_CONTROL_POINTS);
+    let pts: Vec<DVec3> = run.iter().map(|&i| v[i]).collect();
+    let Some((s, error)) = spline::fit(&pts, tol, max_control) else { return };
+    let first = chain[0].clone();
+    let spline = Piece {
+        kind: Kind::Spline,
+        segments: run.len() - 1,
+        end: pts[pts.len() - 1],
+        centre: None,
+        axis: None,
+        radius: None,
+        sweep_deg: None,
+        error,
+        spline: Some(s),
+        ..first
+    };
+    if cost(&spline) < budget {
+        out.truncate(from);
+        out.push(spline);
+    }
+}
+
+/// Most control points a spline piece may have: DXF counts them in 16 bits, and a run that
+/// needs more is no smoother than its polyline.
+const MAX_CONTROL_POINTS: usize = 4096;
+
 /// Types one run between corners: greedily, the longest line or arc from each piece's start
 /// (the line where it reaches as far); runs of single steps that neither holds beyond become
-/// one polyline piece.
+/// one spline piece, or a polyline piece where no spline holds.
 fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piece>) {
     let pts: Vec<DVec3> = run.iter().map(|&i| v[i]).collect();
     let m = pts.len();
@@ -238,15 +299,19 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
         axis: None,
         radius: None,
         sweep_deg: None,
+        spline: None,
         error: 0.0,
     };
     let mut i = 0;
     let mut loose: Option<usize> = None;
     let flush = |loose: &mut Option<usize>, to: usize, out: &mut Vec<Piece>| {
-        if let Some(from) = loose.take() {
-            let mut p = piece(if to - from > 1 { Kind::Polyline } else { Kind::Line }, from, to);
-            p.error = if to - from > 1 { 0.0 } else { line_error(&pts[from..=to]) };
-            out.push(p);
+        let Some(from) = loose.take() else { return };
+        if to - from == 1 {
+            out.push(Piece { error: line_error(&pts[from..=to]), ..piece(Kind::Line, from, to) });
+        } else if let Some((s, error)) = spline::fit(&pts[from..=to], tol, MAX_CONTROL_POINTS) {
+            out.push(Piece { spline: Some(s), error, ..piece(Kind::Spline, from, to) });
+        } else {
+            out.push(piece(Kind::Polyline, from, to));
         }
     };
     while i + 1 < m {
@@ -326,7 +391,9 @@ pub(crate) fn tolerance(kappa: f64, noise: f64) -> f64 {
 
 /// Writes `curves.json`: the pieces of every curve within `tol` (see [`pieces`]), one JSON
 /// record a piece with its curve's confidence and shape and the two surface normals at its
-/// ends.
+/// ends. A record holds the fields of [`Piece`]: `kind`, `start`, `end` and `error` for every
+/// piece, `centre`, `axis`, `radius` and `sweep_deg` for an arc or a circle (null otherwise),
+/// and for a spline its `degree` (3), `knots` (clamped, from 0 to 1) and `control_points`.
 pub(crate) fn write_pieces(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f64) -> Result<()> {
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut w = BufWriter::new(f);
@@ -385,6 +452,12 @@ mod tests {
                 let d = match p.kind {
                     Kind::Line => crate::curves::segment_distance(q, p.start, p.end),
                     Kind::Arc | Kind::Circle => off_circle(q, p.centre.unwrap(), p.axis.unwrap(), p.radius.unwrap()),
+                    Kind::Spline => {
+                        // (Distance from the spline drawn finely, not at the vertex's own parameter.)
+                        let s = p.spline.as_ref().unwrap();
+                        let drawn: Vec<DVec3> = (0..=4000).map(|k| s.at(k as f64 / 4000.0)).collect();
+                        drawn.windows(2).map(|w| crate::curves::segment_distance(q, w[0], w[1])).fold(f64::INFINITY, f64::min)
+                    }
                     Kind::Polyline => 0.0,
                 };
                 assert!(d <= tol, "{:?} misses a vertex by {d}", p.kind);
@@ -510,6 +583,22 @@ mod tests {
         assert_eq!(pieces.len(), 1, "{pieces:?}");
         assert_eq!(pieces[0].kind, Kind::Polyline);
         check(&pl, &pieces, 0.01);
+    }
+
+    #[test]
+    fn a_free_form_run_is_one_spline_that_shares_its_corner() {
+        // A straight side, a corner, then a twisted cubic: no arc holds it whole, and the short
+        // arcs that would each hold a stretch take more numbers than one spline.
+        let mut pl = polyline((0..=20).map(|k| DVec3::new(k as f64 / 20.0 - 1.0, 0.0, 0.0)), false);
+        pl.vertices.extend((1..=200).map(|k| k as f64 / 200.0).map(|x| Vertex::at(DVec3::new(x, x * x * x, 0.5 * x * x))));
+        pl.vertices[20].corner = true;
+        for tol in [1e-4, 1e-3] {
+            let p = pieces(&pl, tol);
+            assert_eq!(p.iter().map(|p| p.kind).collect::<Vec<_>>(), [Kind::Line, Kind::Spline], "{tol}");
+            assert_eq!((p[0].end, p[1].start), (DVec3::ZERO, DVec3::ZERO));
+            assert!(p[1].spline.as_ref().unwrap().control_points.len() < 20);
+            check(&pl, &p, tol);
+        }
     }
 
     #[test]

@@ -103,7 +103,9 @@ pub struct PieceCounts {
     pub arcs: u64,
     /// Whole circles.
     pub circles: u64,
-    /// Runs of the polyline no line or arc fits within the tolerance.
+    /// Cubic B-splines, where no line or arc fits within the tolerance.
+    pub splines: u64,
+    /// Runs of the polyline no spline holds either.
     pub polylines: u64,
 }
 
@@ -113,6 +115,7 @@ impl PieceCounts {
             "line" => self.lines += 1,
             "arc" => self.arcs += 1,
             "circle" => self.circles += 1,
+            "spline" => self.splines += 1,
             _ => self.polylines += 1,
         }
     }
@@ -183,7 +186,10 @@ pub fn render_status(s: &Status) -> String {
     }
     out += &format!("  outputs    {}\n", if s.finished { "written" } else { "not yet" });
     if let Some(p) = &s.pieces {
-        out += &format!("  pieces     {} lines, {} arcs, {} circles, {} polyline runs (of {} curves)\n", p.lines, p.arcs, p.circles, p.polylines, p.curves);
+        out += &format!(
+            "  pieces     {} lines, {} arcs, {} circles, {} splines, {} polyline runs (of {} curves)\n",
+            p.lines, p.arcs, p.circles, p.splines, p.polylines, p.curves
+        );
     }
     if !s.labels.is_empty() {
         let copies = if s.labels.len() == 1 { "copy" } else { "copies" };

@@ -267,7 +267,10 @@ fn status_lists_the_typed_pieces_by_kind() {
     let status = |dir: &Path| -> serde_json::Value { serde_json::from_slice(&crease(&["status", dir.to_str().unwrap(), "--json"]).stdout).unwrap() };
     let s = status(&dir);
     let p = &s["pieces"];
-    assert_eq!([&p["lines"], &p["arcs"], &p["circles"], &p["polylines"]].map(|x| x.as_u64().unwrap()), ["line", "arc", "circle", "polyline"].map(count));
+    assert_eq!(
+        [&p["lines"], &p["arcs"], &p["circles"], &p["splines"], &p["polylines"]].map(|x| x.as_u64().unwrap()),
+        ["line", "arc", "circle", "spline", "polyline"].map(count)
+    );
     assert_eq!(p["curves"].as_u64(), Some(12));
     assert!(p["lines"].as_u64().unwrap() >= 12, "a cube's edges are lines: {p}");
     std::fs::remove_file(dir.join("curves.json")).unwrap();

@@ -49,12 +49,48 @@ fn check_cover(pieces: &[serde_json::Value], curves: &[crease::curves::Polyline]
                         let h = d.dot(ax);
                         ((d - h * ax).length() - r).hypot(h)
                     }
+                    "spline" => {
+                        let drawn = draw_spline(p);
+                        assert!(drawn[0].distance(span[0]) < 1e-9 && drawn[drawn.len() - 1].distance(span[segs]) < 1e-9, "a spline through its ends");
+                        drawn.windows(2).map(|w| segment_distance(*q, w[0], w[1])).fold(f64::INFINITY, f64::min)
+                    }
                     _ => 0.0,
                 };
                 assert!(d <= tol * (1.0 + 1e-9), "a {} piece of curve {} misses a vertex by {d} (tolerance {tol})", p["kind"], c.id);
             }
         }
     }
+}
+
+fn segment_distance(q: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let t = ((q - a).dot(b - a) / (b - a).length_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+    q.distance(a + t * (b - a))
+}
+
+/// The point at `t` of the B-spline of `degree` with `knots` and `control` points, by de Boor's
+/// algorithm (written here apart from the library's basis functions, as a check of what the
+/// JSON says).
+fn de_boor(degree: usize, knots: &[f64], control: &[DVec3], t: f64) -> DVec3 {
+    let k = (degree..control.len()).rfind(|&k| knots[k] <= t).unwrap_or(degree);
+    let mut d: Vec<DVec3> = (0..=degree).map(|j| control[j + k - degree]).collect();
+    for r in 1..=degree {
+        for j in (r..=degree).rev() {
+            let (lo, hi) = (knots[j + k - degree], knots[j + 1 + k - r]);
+            let a = if hi > lo { (t - lo) / (hi - lo) } else { 0.0 };
+            d[j] = (1.0 - a) * d[j - 1] + a * d[j];
+        }
+    }
+    d[degree]
+}
+
+/// A spline piece of `curves.json` drawn at 4,001 points from its start to its end.
+fn draw_spline(p: &serde_json::Value) -> Vec<DVec3> {
+    let degree = p["degree"].as_u64().unwrap() as usize;
+    let knots: Vec<f64> = p["knots"].as_array().unwrap().iter().map(|k| k.as_f64().unwrap()).collect();
+    let control: Vec<DVec3> = p["control_points"].as_array().unwrap().iter().map(point).collect();
+    assert_eq!(knots.len(), control.len() + degree + 1);
+    let (a, b) = (knots[degree], knots[control.len()]);
+    (0..=4000).map(|i| de_boor(degree, &knots, &control, a + (b - a) * i as f64 / 4000.0)).collect()
 }
 
 /// A DXF entity's extended data item named `name` (the one after it).
@@ -130,6 +166,15 @@ fn check_dxf(out: &Path, pieces: &[serde_json::Value], curves: &[crease::curves:
                 let d = start - ocs_point(&c.center, 0.0, &c.normal, 0.0);
                 assert!(d.dot(n).abs() <= 1e-9 * scale && ((d - d.dot(n) * n).length() - c.radius).abs() <= 1e-9 * scale, "{c:?} for {p}");
                 "CIRCLE"
+            }
+            EntityType::Spline(s) => {
+                assert!(kind == "spline" && s.degree_of_curve as u64 == p["degree"].as_u64().unwrap(), "{p}");
+                let knots: Vec<f64> = p["knots"].as_array().unwrap().iter().map(|k| k.as_f64().unwrap()).collect();
+                assert!(s.knot_values.len() == knots.len() && s.knot_values.iter().zip(&knots).all(|(a, b)| (a - b).abs() <= 1e-12), "{p}");
+                let control: Vec<DVec3> = p["control_points"].as_array().unwrap().iter().map(point).collect();
+                assert!(s.control_points.len() == control.len() && s.control_points.iter().zip(&control).all(|(a, b)| near(at(a), *b)), "{p}");
+                assert!(near(control[0], start) && near(control[control.len() - 1], end), "{p}");
+                "SPLINE"
             }
             EntityType::Polyline(pl) => {
                 assert!(kind == "polyline" && pl.is_3d_polyline(), "{p}");
@@ -244,4 +289,24 @@ fn the_fandisks_arcs_read_back_from_the_dxf_to_their_pieces_ends() {
             }
         }
     }
+}
+
+/// Under noise, runs of the fandisk that no line or arc holds are cubic splines: within the
+/// tolerance of every vertex they replace, through their ends, drawn in the DXF as SPLINEs of
+/// the same knots and control points on their own layer.
+#[test]
+fn a_noisy_fandisks_free_runs_are_splines_in_the_dxf() {
+    let d = tempfile::tempdir().unwrap();
+    let cloud = d.path().join("fandisk.las");
+    let st = Command::new(env!("CARGO_BIN_EXE_crease"))
+        .args(["synth", "shape", "fandisk", "-n", "200000", "--noise", "0.005", "-o", cloud.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(st.status.success());
+    let out = d.path().join("run");
+    let (pieces, curves, tol) = typed(&cloud, &out);
+    check_cover(&pieces, &curves, tol);
+    assert!(pieces.iter().any(|p| p["kind"] == "spline"), "{pieces:?}");
+    let (drawn, _) = check_dxf(&out, &pieces, &curves);
+    assert!(drawn.iter().any(|(l, w)| l == "crease_splines" && *w == "SPLINE"), "{drawn:?}");
 }

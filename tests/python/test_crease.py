@@ -211,7 +211,7 @@ def test_curves_as_arrays(fixtures):
     assert curves[-1].id == list(curves)[-1].id
     with pytest.raises(IndexError):
         curves[len(curves)]
-    assert {c.kind for c in curves} <= {"line", "arc", "circle", "polyline", "mixed"}
+    assert {c.kind for c in curves} <= {"line", "arc", "circle", "spline", "polyline", "mixed"}
 
 
 def test_to_geopandas(fixtures, tmp_path):

@@ -77,7 +77,7 @@ class Curve:
         """How the curve ends: ``corner``, ``free`` or ``closed``."""
     @property
     def kind(self) -> Optional[str]:
-        """``line``, ``arc``, ``circle``, ``polyline`` or ``mixed``, from the curve's typed pieces;
+        """``line``, ``arc``, ``circle``, ``spline``, ``polyline`` or ``mixed``, from the curve's typed pieces;
         None where their tolerance is not known (curves read without their run's report)."""
     @property
     def radius(self) -> Optional[float]:
