@@ -282,6 +282,7 @@ fn extract_file(
     opts.recursive = o.take("recursive")?.unwrap_or(false);
     opts.work_dir = o.take("work_dir")?;
     opts.clean = o.take("clean")?.unwrap_or(false);
+    opts.label_points = o.take("label_points")?.unwrap_or(false);
     let columns = match o.take::<String>("columns")? {
         Some(c) => Some(TextColumns::parse(&c, o.take("skip_lines")?.unwrap_or(0)).map_err(|e| PyValueError::new_err(format!("--columns {e}")))?),
         None => None,
@@ -647,6 +648,16 @@ impl Run {
     #[getter]
     fn outputs(&self) -> Vec<PathBuf> {
         run::OUTPUTS.iter().map(|f| self.dir.join(f)).filter(|f| f.is_file()).collect()
+    }
+
+    /// The labelled copies of the inputs (`label_points`), one per input file: `labels/NAME.laz`
+    /// (or `.ply` for PLY input), with the extra dimensions `edge_distance`, `curve_id` and `edge`.
+    #[getter]
+    fn labels(&self, py: Python<'_>) -> PyResult<Vec<PathBuf>> {
+        match self.report.bind(py).get_item("labels") {
+            Ok(v) => v.extract(),
+            Err(_) => Ok(Vec::new()),
+        }
     }
 
     /// The curves the run wrote.

@@ -69,6 +69,22 @@ def test_parameters_and_output_settings_are_the_command_lines(cli, cube_las, tmp
     assert_same_curves(crease.extract(laspy.read(cube_las), outside=np.array([[0.5, 0.5, 5.0]])), expected)
 
 
+def test_label_points_writes_the_command_lines_labelled_copy(cli, cube_las, tmp_path):
+    cli("extract", cube_las, "-o", tmp_path / "cli", "-q", "--label-points")
+    run = crease.extract_file(str(cube_las), str(tmp_path / "py"), label_points=True)
+    assert [p.name for p in run.labels] == ["cube.laz"]
+    got, expected = laspy.read(run.labels[0]), laspy.read(tmp_path / "cli" / "labels" / "cube.laz")
+    source = laspy.read(cube_las)
+    assert len(got.points) == len(source.points)
+    assert np.array_equal(got.x, source.x) and np.array_equal(got.z, source.z)
+    for name in ("edge_distance", "curve_id", "edge"):
+        assert np.array_equal(got[name], expected[name]), name
+    assert 0 < int(np.sum(got["edge"])) < len(got.points)
+    # Without the keyword, a finished run removes its copies.
+    assert crease.extract_file(str(cube_las), str(tmp_path / "py")).labels == []
+    assert not (tmp_path / "py" / "labels").exists()
+
+
 def test_the_interpreter_is_free_while_extract_runs(fixtures):
     pts = crease._as_points(laspy.read(fixtures / "fandisk.las"))
     done, ticks = threading.Event(), 0

@@ -91,7 +91,8 @@ def extract_file(
     ``memory`` is the budget (bytes, or ``"4G"``; default half the machine's memory), which sizes
     the tiles. Besides the parameters of :func:`extract`: ``formats`` (a list of ``"obj"``,
     ``"ply"``, ``"geojson"``, ``"gpkg"``, ``"dxf"``, ``"json"``), ``force``, ``recursive``,
-    ``work_dir``, ``clean``, and the input filters ``classes``, ``keep_noise``, ``columns``,
+    ``work_dir``, ``clean``, ``label_points`` (a labelled copy of each input file, see
+    :attr:`Run.labels`), and the input filters ``classes``, ``keep_noise``, ``columns``,
     ``skip_lines``, ``bounds`` (4 or 6 numbers).
 
     The interpreter is released while it runs. ``progress`` draws a bar per stage (tqdm's where

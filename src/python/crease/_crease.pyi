@@ -171,6 +171,10 @@ class Run:
         """``report.json`` as a dict: inputs, resolved parameters, counts per stage, seconds per
         pass, peak memory, tiles, warnings, CRS, ``resumed``."""
     @property
+    def labels(self) -> list[Path]:
+        """The labelled copies of the inputs (``label_points``): ``labels/NAME.laz`` (``.ply`` for
+        PLY input) with the extra dimensions ``edge_distance``, ``curve_id`` and ``edge``."""
+    @property
     def outputs(self) -> list[Path]:
         """The files written: the curve files, ``preview.png``, ``report.json``."""
     def curves(self) -> Curves:
