@@ -50,8 +50,9 @@ for run in "$@"; do
       [ "$gdal_name" = "$name" ] || verdict=FAIL
       crs="\"$gdal_name\" (run: \"$name\", no code)"
     else
-      # (A run without a CRS must not be read as WGS 84: GDAL should see an unknown local one.)
-      [ "$gdal_name" = unknown ] || verdict=FAIL
+      # (A run without a CRS must not be read as WGS 84: GDAL should see an unknown local one,
+      # or in a GeoPackage the standard's undefined Cartesian system, srs_id -1.)
+      [ "$gdal_name" = unknown ] || [ "$gdal_name" = "Undefined Cartesian SRS" ] || verdict=FAIL
       crs="\"$gdal_name\" (run: none)"
     fi
     # (A run without curves has no fields to show; GeoPackage keeps the id as its FID.)
@@ -60,16 +61,29 @@ for run in "$@"; do
     [ "$verdict" = ok ] || status=1
     printf '%-4s %-36s %-7s features %s/%s  fields %s  CRS %s\n' "$verdict" "$(basename "$run")" "$ext" "$count" "$curves" "$fields" "$crs"
   done
-  # A run written with --format dxf: its curves are the polylines on layer crease_curves, each
-  # with its attributes as the CREASE application's extended data (GDAL shows them as
-  # RawCodeValues); DXF has no CRS.
+  # A run written with --format dxf: each curve as its typed pieces, a LINE, ARC, CIRCLE, SPLINE
+  # or 3D POLYLINE on the layer of its kind, each with its curve's attributes as the CREASE
+  # application's extended data (GDAL shows them as RawCodeValues); DXF has no CRS. The pieces
+  # GDAL reads, by layer, are those of curves.json when the run wrote it too (--format json).
   if [ -f "$run/curves.dxf" ]; then
     info=$(ogrinfo --config DXF_INCLUDE_RAW_CODE_VALUES TRUE -al -q "$run/curves.dxf" 2>/dev/null)
-    lines=$(grep -c '^  Layer (String) = crease_curves' <<<"$info" || true)
+    count() { grep -c "^  Layer (String) = crease_$1\$" <<<"$info" || true; }
+    got="$(count lines) lines, $(count arcs) arcs, $(count circles) circles, $(count splines) splines, $(count curves) polylines"
+    pieces=$(( $(count lines) + $(count arcs) + $(count circles) + $(count splines) + $(count curves) ))
     attributed=$(grep -c '^  RawCodeValues (StringList) = .*1001 CREASE,1000 id,' <<<"$info" || true)
     verdict=ok
-    [ "$lines" = "$curves" ] && [ "$attributed" = "$curves" ] || { verdict=FAIL; status=1; }
-    printf '%-4s %-36s %-7s features %s/%s  with attributes %s  CRS none (DXF has none)\n' "$verdict" "$(basename "$run")" dxf "$lines" "$curves" "$attributed"
+    [ "$attributed" = "$pieces" ] || verdict=FAIL
+    want=""
+    if [ -f "$run/curves.json" ]; then
+      want=$(python3 -c "
+import json, sys
+p = json.load(open(sys.argv[1]))['pieces']
+n = lambda k: sum(1 for x in p if x['kind'] == k)
+print(f\"{n('line')} lines, {n('arc')} arcs, {n('circle')} circles, {n('spline')} splines, {n('polyline')} polylines\")" "$run/curves.json")
+      [ "$got" = "$want" ] || verdict=FAIL
+    fi
+    [ "$verdict" = ok ] || status=1
+    printf '%-4s %-36s %-7s %s (curves.json: %s)  with attributes %s  CRS none (DXF has none)\n' "$verdict" "$(basename "$run")" dxf "$got" "${want:-not written}" "$attributed"
   fi
   rm -rf "$tmp"
 done
