@@ -1,7 +1,9 @@
 //! `preview.png`: a quick look at a run. The cloud from the top and from an oblique view, side
 //! by side, points subsampled and shaded by the slope of their depth, and the curves drawn
-//! over them in a colour per curve.
+//! over them in the colour of their typed pieces' kind (see [`kind_colour`]), so that a user
+//! sees at a glance what a CAD program will get: lines, arcs, circles or splines.
 
+use crate::curves::typed::{self, Kind};
 use crate::curves::Curves;
 use crate::error::{Error, Result};
 use glam::{DMat3, DVec3};
@@ -35,21 +37,22 @@ impl Image {
     }
 }
 
-/// The two views of `points` and `curves` (world coordinates), side by side.
-pub(crate) fn render(points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<Image> {
+/// The two views of `points` and `curves` (world coordinates), side by side, the curves typed
+/// within `tol`.
+pub(crate) fn render(points: &[DVec3], curves: &(impl Curves + ?Sized), tol: f64) -> Result<Image> {
     let mut image = Image::new(2 * SIDE, SIDE);
     // Top: looking down. Oblique: turned 30 degrees about the vertical, tilted to look down at
     // 35 degrees.
     let oblique = DMat3::from_rotation_x(-55f64.to_radians()) * DMat3::from_rotation_z(-30f64.to_radians());
     for (k, view) in [DMat3::IDENTITY, oblique].into_iter().enumerate() {
-        draw_view(&mut image, k * SIDE, view, points, curves)?;
+        draw_view(&mut image, k * SIDE, view, points, curves, tol)?;
     }
     Ok(image)
 }
 
-/// Writes the preview of `points` and `curves` to `path` as PNG.
-pub(crate) fn write_png(path: &Path, points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<()> {
-    let image = render(points, curves)?;
+/// Writes the preview of `points` and `curves` (typed within `tol`) to `path` as PNG.
+pub(crate) fn write_png(path: &Path, points: &[DVec3], curves: &(impl Curves + ?Sized), tol: f64) -> Result<()> {
+    let image = render(points, curves, tol)?;
     let f = std::fs::File::create(path).map_err(|e| Error::output(path, e))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(f), image.width as u32, image.height as u32);
     enc.set_color(png::ColorType::Rgb);
@@ -64,7 +67,7 @@ pub(crate) fn write_png(path: &Path, points: &[DVec3], curves: &(impl Curves + ?
 
 /// Draws one view into the square of `image` starting at column `x0`: `view` turns world
 /// directions into view directions (x right, y up, z towards the viewer).
-fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves: &(impl Curves + ?Sized)) -> Result<()> {
+fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves: &(impl Curves + ?Sized), tol: f64) -> Result<()> {
     let centre = points.iter().fold(DVec3::ZERO, |s, &p| s + p) / points.len().max(1) as f64;
     let to_view = |p: DVec3| view * (p - centre);
     let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
@@ -114,9 +117,14 @@ fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves
         }
     }
     curves.each(&mut |c| {
-        let colour = curve_colour(c.id);
         let n = c.vertices.len();
-        for s in 0..c.segment_count() {
+        let mut colours = vec![kind_colour(Kind::Polyline); c.segment_count()];
+        for p in typed::pieces(c, tol) {
+            for k in 0..p.segments {
+                colours[(p.first + k) % n] = kind_colour(p.kind);
+            }
+        }
+        for (s, &colour) in colours.iter().enumerate() {
             let (a, b) = (pixel(to_view(c.vertices[s].p)), pixel(to_view(c.vertices[(s + 1) % n].p)));
             let steps = (b.0 - a.0).abs().max((b.1 - a.1).abs()).ceil().max(1.0) as usize;
             for i in 0..=steps {
@@ -132,6 +140,18 @@ fn draw_view(image: &mut Image, x0: usize, view: DMat3, points: &[DVec3], curves
         }
         Ok(())
     })
+}
+
+/// The colour of a piece's kind: lines blue, arcs green, circles orange, splines magenta, and
+/// polyline runs (where no spline holds) red.
+pub(crate) fn kind_colour(kind: Kind) -> [u8; 3] {
+    match kind {
+        Kind::Line => [30, 90, 220],
+        Kind::Arc => [20, 160, 40],
+        Kind::Circle => [235, 140, 0],
+        Kind::Spline => [200, 0, 200],
+        Kind::Polyline => [220, 0, 0],
+    }
 }
 
 /// A saturated colour for curve `id`: hues a golden angle apart, so neighbours differ.
@@ -155,12 +175,12 @@ mod tests {
     use super::*;
 
     /// A flat square seen from the top is grey where its points are and white around it, and
-    /// a curve along its edge is drawn in the curve's colour.
+    /// a straight curve along its edge is drawn in the colour of lines.
     #[test]
     fn points_are_shaded_and_curves_coloured() {
         let points: Vec<DVec3> = (0..40_000).map(|i| DVec3::new((i % 200) as f64 * 0.005, (i / 200) as f64 * 0.005, 0.0)).collect();
         let curve = crate::curves::Polyline::from_points(3, [DVec3::ZERO, DVec3::new(0.995, 0.0, 0.0)]);
-        let image = render(&points, &[curve][..]).unwrap();
+        let image = render(&points, &[curve][..], 1e-3).unwrap();
         let at = |x: usize, y: usize| &image.rgb[3 * (y * image.width + x)..3 * (y * image.width + x) + 3];
         // The square fills the top view but its margin; its middle is lit grey, not white.
         let middle = at(SIDE / 2, SIDE / 2);
@@ -168,7 +188,7 @@ mod tests {
         assert_eq!(at(5, 5), &[255, 255, 255]);
         // The curve runs along the bottom edge of the top view (y = 0 is the lowest row drawn).
         let row = (SIDE as f64 * 0.96) as usize;
-        let coloured = (0..SIDE).filter(|&x| (row - 2..=row + 1).any(|y| at(x, y) == curve_colour(3))).count();
+        let coloured = (0..SIDE).filter(|&x| (row - 2..=row + 1).any(|y| at(x, y) == kind_colour(Kind::Line))).count();
         assert!(coloured > SIDE / 2, "{coloured} pixels of the curve");
     }
 
@@ -179,7 +199,7 @@ mod tests {
 
         let points: Vec<DVec3> = (0..10_000).map(|i| DVec3::new((i % 100) as f64, (i / 100) as f64, 0.0)).collect();
         let curves = [Polyline::from_points(0, [DVec3::ZERO, DVec3::new(99.0, 0.0, 0.0)])];
-        let image = crate::preview::render(&points, &curves[..])?;
+        let image = crate::preview::render(&points, &curves[..], 1e-3)?;
         assert_eq!((image.width, image.height), (2 * crate::preview::SIDE, crate::preview::SIDE));
         Ok(())
     }

@@ -190,7 +190,7 @@ fn write_outputs(dir: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, sample:
     std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
     let (written, preview) = rayon::join(
         || formats.iter().try_for_each(|f| f.write(&tmp.join(f.file_name()), curves, crs, tolerance)),
-        || crate::preview::write_png(&tmp.join("preview.png"), sample, curves),
+        || crate::preview::write_png(&tmp.join("preview.png"), sample, curves, tolerance),
     );
     written.and(preview)?;
     for f in formats.iter().map(|f| f.file_name()).chain(["preview.png"]) {
