@@ -73,3 +73,42 @@ pub(crate) fn spacing_or_cancel(points: &[DVec3], samples: usize, cancel: &Cance
     let k = K.min(points.len().saturating_sub(1)).max(1);
     Ok(median_kth_distance(points, k, samples, cancel)? * ((2f64).ln() / k as f64).sqrt())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    fn plane(n: usize) -> Vec<DVec3> {
+        let mut rng = Rng::stream(61, 0);
+        (0..n).map(|_| DVec3::new(3.0 * rng.f64(), 2.0 * rng.f64(), 0.01 * rng.f64())).collect()
+    }
+
+    /// Over three parts of at most [`PART`] points, the probe finds the median distance that
+    /// one tree over all the points gives, to the bit.
+    #[test]
+    fn trees_in_parts_give_the_distance_of_one_tree() {
+        let points = plane(700_000);
+        let (k, samples) = (16, 2000);
+        let local: Vec<[f32; 3]> = points.iter().map(|p| (*p - points[0]).as_vec3().to_array()).collect();
+        let index = Index::new_parallel(&local);
+        let mut d: Vec<f32> = vec![];
+        let mut nn = vec![];
+        for q in local.iter().step_by(points.len() / samples) {
+            nn.clear();
+            index.nearest_n(q, k + 1, &mut nn);
+            d.push(nn[k].1.sqrt());
+        }
+        let m = d.len() / 2;
+        let one_tree = *d.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1 as f64;
+        assert_eq!(median_kth_distance(&points, k, samples, &Cancel::default()).unwrap(), one_tree);
+    }
+
+    /// A probe asked to stop builds no tree and returns the interruption.
+    #[test]
+    fn a_cancelled_probe_stops() {
+        let cancel = Cancel::default();
+        cancel.set();
+        assert!(matches!(spacing_or_cancel(&plane(300_000), 2000, &cancel), Err(crate::Error::Interrupted)));
+    }
+}
