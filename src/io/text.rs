@@ -169,6 +169,14 @@ impl TextReader {
                 continue;
             }
             let text = std::str::from_utf8(raw).map_err(|_| Error::input(&self.path, format!("line {} is not text", self.line)))?.trim();
+            // (A spreadsheet's export with decimal commas was read as twice the values, and
+            // made a cloud of integers and digits: points on a few lines ten million long.)
+            if text.contains(';') && text.contains(',') {
+                return Err(Error::input(
+                    &self.path,
+                    format!("line {}: both ';' and ',' separate values (decimal commas?); write the numbers with decimal points", self.line),
+                ));
+            }
             // x, y, z and the class, by slot.
             let mut got = [0.0f64; 4];
             let mut n = 0;
