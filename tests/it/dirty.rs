@@ -192,3 +192,23 @@ fn a_long_thin_cloud_is_tiled_along_its_length() {
     assert!(report["tiles"].as_u64().unwrap() <= 2, "{} tiles for 30 k points", report["tiles"]);
     assert!(t.elapsed().as_secs() < 20, "{:?}", t.elapsed());
 }
+
+/// `crease info` reads one block of a file; the copies among the points of that block are
+/// counted and said to be of the block, not guessed for the file.
+#[test]
+fn info_counts_the_copies_in_the_block_it_reads() {
+    let d = tempfile::tempdir().unwrap();
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let twice: Vec<DVec3> = cube.iter().chain(&cube[..5_000]).copied().collect();
+    for (name, points, copies) in [("plain.ply", &cube, 0), ("twice.ply", &twice, 5_000)] {
+        let p = d.path().join(name);
+        write_ply(&p, points);
+        let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(["info", "--json", p.to_str().unwrap()]).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v[0]["sample_copies"].as_u64(), Some(copies), "{name}");
+        let text = Command::new(env!("CARGO_BIN_EXE_crease")).args(["info", p.to_str().unwrap()]).output().unwrap();
+        let text = String::from_utf8_lossy(&text.stdout);
+        assert_eq!(text.contains(&format!("copies   {copies} of those 25000 points")), copies > 0, "{text}");
+    }
+}
