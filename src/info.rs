@@ -21,6 +21,11 @@ pub struct FileInfo {
     pub spacing: f64,
     /// How many points the spacing estimate is based on.
     pub spacing_sample: usize,
+    /// How many of those points are at the very position of another of them: a count over
+    /// the block read, not an estimate for the file (copies cluster where scans overlap, and
+    /// a file written twice over holds none in its first block). `crease extract` counts
+    /// every copy, exact and near, in `report.json`.
+    pub sample_copies: usize,
 }
 
 /// Reads the header of `path` and estimates its point spacing from the first
@@ -45,15 +50,16 @@ pub fn file_info(path: &Path) -> Result<FileInfo> {
             header.count = n;
         }
     }
-    let spacing = estimate_spacing(&sample.xyz, header.count, &header.bounds);
-    Ok(FileInfo { header, spacing, spacing_sample: sample.len() })
+    let (spacing, distinct) = estimate_spacing(&sample.xyz, header.count, &header.bounds);
+    Ok(FileInfo { header, spacing, spacing_sample: sample.len(), sample_copies: sample.len() - distinct })
 }
 
 /// Spacing from a contiguous block of a file's points. Scanner files are written in scan order,
 /// so a block is a dense patch; synthetic or shuffled files give a thinned random subsample.
 /// Both are handled by comparing the block's share of the points with its share of the area
-/// (areas from the two largest extents of the bounding boxes), assuming even density.
-pub(crate) fn estimate_spacing(block: &[DVec3], total: u64, bounds: &Bounds) -> f64 {
+/// (areas from the two largest extents of the bounding boxes), assuming even density. Also
+/// returns how many distinct positions the block holds.
+pub(crate) fn estimate_spacing(block: &[DVec3], total: u64, bounds: &Bounds) -> (f64, usize) {
     // (Copies of a point are measured once: 100 k copies of one point in one kd-tree bucket
     // took seconds to query, and copies shorten the spacing.)
     let mut distinct: Vec<[u64; 3]> = block.iter().map(|&p| crate::keys::bits_key(p + DVec3::ZERO)).collect();
@@ -64,8 +70,9 @@ pub(crate) fn estimate_spacing(block: &[DVec3], total: u64, bounds: &Bounds) -> 
     } else {
         crate::spacing::spacing(&distinct.iter().map(|b| DVec3::from_array(b.map(f64::from_bits))).collect::<Vec<_>>(), 20_000)
     };
+    let n = distinct.len();
     if block.len() < 2 || total == 0 || bounds.is_empty() {
-        return d;
+        return (d, n);
     }
     let area = |b: &Bounds| {
         let mut e: Vec<f64> = (0..3).map(|i| (b.max[i] - b.min[i]).max(0.0)).collect();
@@ -74,11 +81,11 @@ pub(crate) fn estimate_spacing(block: &[DVec3], total: u64, bounds: &Bounds) -> 
     };
     let (a_block, a_all) = (area(&Bounds::of(block.iter().copied())), area(bounds));
     if a_block <= 0.0 || a_all <= 0.0 {
-        return d;
+        return (d, n);
     }
     let expected = total as f64 * (a_block / a_all).min(1.0);
     let thinning = (block.len() as f64 / expected).min(1.0);
-    d * thinning.sqrt()
+    (d * thinning.sqrt(), n)
 }
 
 /// Formats infos as human-readable text.
@@ -106,6 +113,14 @@ pub fn render_text(infos: &[FileInfo]) -> String {
             let _ = writeln!(s, "  scanners at {:.3} {:.3} {:.3}{more}", first.x, first.y, first.z);
         }
         let _ = writeln!(s, "  spacing  {:.4} (from {} points)", i.spacing, i.spacing_sample);
+        if i.sample_copies > 0 {
+            // (Counted over the block read, not estimated for the file: see FileInfo.)
+            let _ = writeln!(
+                s,
+                "  copies   {} of those {} points repeat the position of another of them (`extract` counts all)",
+                i.sample_copies, i.spacing_sample
+            );
+        }
     }
     s
 }

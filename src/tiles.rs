@@ -5,6 +5,7 @@
 //! processed, from the neighbouring tiles' stores, so the halo width can be chosen after the
 //! cloud's spacing and noise are known.
 
+use crate::cancel::Cancel;
 use crate::codec;
 use crate::error::{Error, Result};
 pub(crate) use crate::points::TilePoints;
@@ -129,6 +130,8 @@ pub(crate) fn within(b: &Bounds, halo: f64, p: DVec3) -> bool {
 #[derive(Clone, Copy)]
 pub(crate) struct Store<'a> {
     ws: &'a Workspace,
+    /// Stops reads between frames and a bucketer's writes between tiles, once set.
+    cancel: Option<&'a Cancel>,
 }
 
 /// The codec kind of tile point frames.
@@ -142,7 +145,26 @@ impl<'a> Store<'a> {
     /// The store of workspace `ws` (its directory created if needed).
     pub(crate) fn new(ws: &'a Workspace) -> Result<Store<'a>> {
         ws.create_dir(DIR)?;
-        Ok(Store { ws })
+        Ok(Store { ws, cancel: None })
+    }
+
+    /// The store, whose reads stop between frames (a few hundred points each) and whose
+    /// bucketer stops between tiles once `cancel` is set, with [`Error::Interrupted`]: a tile
+    /// being loaded, or the fullest tile read for the spacing probe, is several hundred
+    /// thousand points, a second's work on a busy machine.
+    pub(crate) fn cancelled_by(self, cancel: &'a Cancel) -> Store<'a> {
+        Store { cancel: Some(cancel), ..self }
+    }
+
+    /// [`Error::Interrupted`] once the store's cancel flag is set (for the loops around its
+    /// reads: a loaded tile's filters and index).
+    pub(crate) fn check(&self) -> Result<()> {
+        self.cancel.map_or(Ok(()), Cancel::check)
+    }
+
+    /// True once the store's cancel flag is set.
+    pub(crate) fn cancelled(&self) -> bool {
+        self.cancel.is_some_and(Cancel::is_set)
     }
 
     fn name(t: u32) -> String {
@@ -198,6 +220,7 @@ impl<'a> Store<'a> {
         let (mut meta, mut z) = (Vec::new(), Vec::new());
         let mut zd = zstd::bulk::Decompressor::new().map_err(|e| Error::input_from(&path, "cannot decompress", e))?;
         while f.read_exact_or_end(&mut head).map_err(truncated)? {
+            self.check()?;
             let h = codec::FrameHeader::parse(&head, KIND, &path)?;
             if h.meta_len != META {
                 return Err(Error::damaged(&path, "tile frame metadata of the wrong size"));
@@ -306,6 +329,8 @@ impl<'a> Bucketer<'a> {
         let o = DVec3::from(self.grid.origin);
         // Tiles are separate files: they are sorted, compressed and written in parallel.
         tiles.into_par_iter().try_for_each(|(t, b)| {
+            // (Bucketing is all or nothing: an interrupted one starts over.)
+            self.store.check()?;
             let mut order: Vec<([i64; 3], u32)> = b.xyz.iter().enumerate().map(|(i, &p)| (crate::grid::cell(p - o, sub).to_array(), i as u32)).collect();
             order.sort_unstable();
             let sorted = TilePoints { xyz: order.iter().map(|r| b.xyz[r.1 as usize]).collect(), gid: order.iter().map(|r| b.gid[r.1 as usize]).collect() };

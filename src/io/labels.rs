@@ -81,6 +81,8 @@ fn label_las(input: &Path, output: &Path, labeller: &dyn Labeller, cancel: &Canc
         xyz.clear();
         xyz.extend(buf.raw_bytes().chunks_exact(rl).map(|r| record_xyz(r, &transforms)));
         labeller.label(&xyz, &mut labels);
+        // (A labeller stopped by the cancel leaves the chunk's labels unset.)
+        cancel.check()?;
         let mut bytes = Vec::with_capacity(xyz.len() * (rl + LABEL_BYTES as usize));
         for (r, l) in buf.raw_bytes().chunks_exact(rl).zip(&labels) {
             bytes.extend_from_slice(r);
@@ -198,9 +200,9 @@ const FORMAT6_LEN: usize = 30;
 /// set the scale and offset.
 fn label_read_points(input: &Path, output: &Path, text: Option<TextColumns>, labeller: &dyn Labeller, cancel: &Cancel) -> Result<u64> {
     let filter = Filter { text, ..Filter::keep_all() };
-    let mut reader = PointReader::open(input, &filter)?;
+    let mut reader = PointReader::open(input, &filter)?.cancelled_by(cancel);
     let crs = reader.header().crs.clone();
-    let (bounds, _) = super::scan_bounds(input, &filter)?;
+    let (bounds, _) = super::scan_bounds_or_cancel(input, &filter, cancel)?;
     let header = generated_header(&bounds, crs.wkt.as_deref())?;
     let transforms = *header.transforms();
     let format = *header.point_format();
@@ -213,6 +215,7 @@ fn label_read_points(input: &Path, output: &Path, text: Option<TextColumns>, lab
             break;
         }
         labeller.label(&chunk.xyz, &mut labels);
+        cancel.check()?;
         let mut bytes = Vec::with_capacity(chunk.len() * (FORMAT6_LEN + LABEL_BYTES as usize));
         for ((p, &class), l) in chunk.xyz.iter().zip(&chunk.class).zip(&labels) {
             push_format6(&mut bytes, *p, class, &transforms);

@@ -257,11 +257,18 @@ pub fn read_header(path: &Path) -> Result<CloudHeader> {
 /// Reads every point of `path` (without class filtering; text columns as `filter` says) to
 /// find its true bounds and count.
 pub fn scan_bounds(path: &Path, filter: &Filter) -> Result<(Bounds, u64)> {
-    let mut reader = PointReader::open(path, &Filter { text: filter.text, ..Filter::keep_all() })?;
+    scan_bounds_or_cancel(path, filter, &crate::cancel::Cancel::default())
+}
+
+/// [`scan_bounds`], stopped between chunks with [`crate::Error::Interrupted`] once `cancel` is
+/// set (a text cloud of millions of points takes seconds to read).
+pub(crate) fn scan_bounds_or_cancel(path: &Path, filter: &Filter, cancel: &crate::cancel::Cancel) -> Result<(Bounds, u64)> {
+    let mut reader = PointReader::open(path, &Filter { text: filter.text, ..Filter::keep_all() })?.cancelled_by(cancel);
     let mut chunk = PointChunk::default();
     let mut b = Bounds::EMPTY;
     let mut n = 0u64;
     while reader.read_chunk(DEFAULT_CHUNK, &mut chunk)? > 0 {
+        cancel.check()?;
         for &p in &chunk.xyz {
             b.grow(p);
         }
@@ -283,6 +290,8 @@ pub struct PointReader {
     table: [bool; 256],
     keep_withheld: bool,
     bounds: Option<Bounds>,
+    /// Stops a text file's chunk between lines (see [`PointReader::cancelled_by`]).
+    cancel: Option<crate::cancel::Cancel>,
 }
 
 impl PointReader {
@@ -308,7 +317,16 @@ impl PointReader {
             Some(FileFormat::Text) => Inner::Text(text::TextReader::open(path, filter.text)?),
             None => return Err(unknown_type(path)),
         };
-        Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise, bounds: filter.bounds })
+        Ok(PointReader { inner, table: filter.class_table(), keep_withheld: filter.keep_noise, bounds: filter.bounds, cancel: None })
+    }
+
+    /// The reader, whose reads of a text file stop with [`crate::Error::Interrupted`] within
+    /// 65,536 points once `cancel` is set: a chunk of a million lines takes
+    /// seconds to parse on a busy machine. (The other formats decode a chunk in a small part
+    /// of a second.)
+    pub(crate) fn cancelled_by(mut self, cancel: &crate::cancel::Cancel) -> PointReader {
+        self.cancel = Some(cancel.clone());
+        self
     }
 
     /// The file's header.
@@ -331,7 +349,7 @@ impl PointReader {
             Inner::Las(r) => r.read_chunk(max, out, &self.table, self.keep_withheld),
             Inner::Ply(r) => r.read_chunk(max, out, &self.table),
             Inner::E57(r) => r.read_chunk(max, out, &self.table),
-            Inner::Text(r) => r.read_chunk(max, out, &self.table),
+            Inner::Text(r) => r.read_chunk(max, out, &self.table, self.cancel.as_ref()),
         }?;
         if let Some(b) = &self.bounds {
             out.retain(|p| b.contains(p));

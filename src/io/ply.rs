@@ -482,6 +482,8 @@ pub(super) fn label_ply(input: &Path, output: &Path, labeller: &dyn super::label
     while r.read_spans(super::label::LABEL_CHUNK, &mut xyz, &mut spans)? > 0 {
         cancel.check()?;
         labeller.label(&xyz, &mut labels);
+        // (A labeller stopped by the cancel leaves the chunk's labels unset.)
+        cancel.check()?;
         bytes.clear();
         for (s, l) in spans.iter().zip(&labels) {
             if ascii {

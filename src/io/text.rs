@@ -54,6 +54,9 @@ impl TextColumns {
 /// is not a point cloud's (a binary file, or one without line ends, that would be held whole).
 pub(super) const MAX_LINE: usize = 64 * 1024;
 
+/// Points read between two looks at a reader's cancel flag (see `PointReader::cancelled_by`).
+const CANCEL_LINES: usize = 1 << 16;
+
 /// The UTF-8 byte order mark, which some Windows programs write before the first line.
 const BOM: &[u8] = &[0xEF, 0xBB, 0xBF];
 
@@ -143,13 +146,18 @@ impl TextReader {
     }
 
     /// Reads up to `max` points into `out` (filtered); returns the number of records read.
-    pub(super) fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256]) -> Result<usize> {
+    pub(super) fn read_chunk(&mut self, max: usize, out: &mut PointChunk, table: &[bool; 256], cancel: Option<&crate::cancel::Cancel>) -> Result<usize> {
         let Some(map) = &self.map else { return Ok(0) };
         let bytes: &[u8] = map;
         let need = self.cols.xyz.iter().copied().chain(self.cols.class).max().unwrap_or(2) + 1;
         let start = self.pos;
         let mut read = 0;
         while read < max && self.pos < bytes.len() {
+            if read % CANCEL_LINES == 0
+                && let Some(c) = cancel
+            {
+                c.check()?;
+            }
             let scan = &bytes[self.pos..bytes.len().min(self.pos + MAX_LINE + 1)];
             let Some(end) = scan.iter().position(|&b| b == b'\n').map(|k| self.pos + k).or((scan.len() <= MAX_LINE).then_some(bytes.len())) else {
                 return Err(Error::input(&self.path, format!("line {} is longer than {MAX_LINE} bytes: not a text point cloud", self.line + 1)));
@@ -161,6 +169,14 @@ impl TextReader {
                 continue;
             }
             let text = std::str::from_utf8(raw).map_err(|_| Error::input(&self.path, format!("line {} is not text", self.line)))?.trim();
+            // (A spreadsheet's export with decimal commas was read as twice the values, and
+            // made a cloud of integers and digits: points on a few lines ten million long.)
+            if text.contains(';') && text.contains(',') {
+                return Err(Error::input(
+                    &self.path,
+                    format!("line {}: both ';' and ',' separate values (decimal commas?); write the numbers with decimal points", self.line),
+                ));
+            }
             // x, y, z and the class, by slot.
             let mut got = [0.0f64; 4];
             let mut n = 0;

@@ -87,7 +87,7 @@ fn bucket_files(files: &[PathBuf], filter: &Filter, b: &mut Sink, bar: &Bar, can
         let reader = s.spawn(move || {
             for (fi, f) in files.iter().enumerate() {
                 let mut r = match PointReader::open(f, filter) {
-                    Ok(r) => r,
+                    Ok(r) => r.cancelled_by(cancel),
                     Err(e) => return drop(tx.send(Err(e))),
                 };
                 loop {

@@ -85,7 +85,8 @@ impl InputFiles {
     /// The bounds of the points `filter` keeps, and the number of points the inputs declare:
     /// from the headers, or from the points where a header's bounds are missing (PLY, E57,
     /// text), not finite or inverted.
-    pub(super) fn bounds(&self, filter: &Filter) -> Result<(Bounds, u64)> {
+    /// Stops with [`Error::Interrupted`] once `cancel` is set.
+    pub(super) fn bounds(&self, filter: &Filter, cancel: &crate::cancel::Cancel) -> Result<(Bounds, u64)> {
         let mut b = Bounds::EMPTY;
         let mut declared = 0;
         for h in &self.headers {
@@ -93,7 +94,7 @@ impl InputFiles {
                 b.union(&h.bounds);
                 declared += h.count;
             } else {
-                let (scanned, n) = io::scan_bounds(&h.path, filter)?;
+                let (scanned, n) = io::scan_bounds_or_cancel(&h.path, filter, cancel)?;
                 b.union(&scanned);
                 // (Text clouds declare no count: the scan's stands in.)
                 declared += if h.count > 0 { h.count } else { n };

@@ -25,18 +25,21 @@ pub const DIR: &str = "labels";
 const KEY: &str = "curves.key";
 
 /// Labels points by the nearest of the curves: `edge` within `tolerance`, a curve id within
-/// `reach` (else -1).
+/// `reach` (else -1). Once `cancel` is set, the points not labelled yet are given the label
+/// of no curve (a chunk of a quarter million points took seconds; the writer checks the flag
+/// before it writes the chunk).
 struct ByNearest {
     nearest: NearestCurve,
     tolerance: f64,
     reach: f64,
+    cancel: crate::cancel::Cancel,
 }
 
 impl Labeller for ByNearest {
     fn label(&self, points: &[glam::DVec3], out: &mut Vec<Label>) {
         points
             .par_iter()
-            .map_init(Vec::new, |scratch, &p| match self.nearest.nearest(p, scratch) {
+            .map_init(Vec::new, |scratch, &p| match (!self.cancel.is_set()).then(|| self.nearest.nearest(p, scratch)).flatten() {
                 Some((d, id)) => Label { distance: d, curve: if d <= self.reach { id as i32 } else { -1 }, edge: (d <= self.tolerance) as u8 },
                 None => Label { distance: f64::INFINITY, curve: -1, edge: 0 },
             })
@@ -60,7 +63,7 @@ impl Run<'_> {
         let reach = r.halo().max(tolerance);
         let key = format!("{} {tolerance:e} {reach:e}\n", nearest.fingerprint());
         prepare_dir(&dir, &key)?;
-        let labeller = ByNearest { nearest, tolerance, reach };
+        let labeller = ByNearest { nearest, tolerance, reach, cancel: self.opts.cancel.clone() };
         let names = labelled_names(files);
         let bar = self.progress.bar("labels", files.len() as u64, "files");
         let mut made = vec![];

@@ -94,11 +94,12 @@ pub(super) fn is_run_file(dir: &Path, f: &Path) -> bool {
 
 /// About `points` of the run's points, chosen by position key (so the same whatever the
 /// tiling), read from the tile store.
-fn sample_tiles(ws: &Workspace, manifest: &Manifest, tiles: &[u32], points: f64) -> Result<Vec<DVec3>> {
+/// Stops with [`Error::Interrupted`] once `cancel` is set.
+fn sample_tiles(ws: &Workspace, manifest: &Manifest, tiles: &[u32], points: f64, cancel: &crate::cancel::Cancel) -> Result<Vec<DVec3>> {
     let total: u64 = manifest.tile_points.iter().sum();
     let share = points / total.max(1) as f64;
     let kq = key_quantum(manifest.diag);
-    let store = Store::new(ws)?;
+    let store = Store::new(ws)?.cancelled_by(cancel);
     let parts: Vec<Vec<DVec3>> = tiles
         .par_iter()
         .map(|&t| {
@@ -127,7 +128,7 @@ pub fn write_view(dir: &Path) -> Result<PathBuf> {
     use_work_dir(&mut ws, &m)?;
     let tiles: Vec<u32> = (0..m.tile_points.len() as u32).filter(|&t| m.tile_points[t as usize] > 0).collect();
     // (A run whose working data was removed has its curves left, not its points.)
-    let points = if m.cleaned { vec![] } else { sample_tiles(&ws, &m, &tiles, crate::view::VIEW_POINTS)? };
+    let points = if m.cleaned { vec![] } else { sample_tiles(&ws, &m, &tiles, crate::view::VIEW_POINTS, &crate::cancel::Cancel::default())? };
     let curves = crate::curves::read_ply(&dir.join("curves.ply"))?;
     let crs = std::fs::read(dir.join("report.json"))
         .ok()
@@ -143,7 +144,7 @@ pub fn write_view(dir: &Path) -> Result<PathBuf> {
 impl Run<'_> {
     /// The finished curves, of the `batches` batches [`Run::curves`] wrote.
     pub(super) fn finished_curves(&self, batches: u32) -> FinishedCurves<'_> {
-        FinishedCurves { ws: &self.ws, batches }
+        FinishedCurves { ws: &self.ws, batches, cancel: &self.opts.cancel }
     }
 
     /// The write step: the curves of the `batches` batches the curve stage wrote go to the
@@ -163,22 +164,30 @@ impl Run<'_> {
     /// About [`PREVIEW_POINTS`](crate::preview::PREVIEW_POINTS) of the cloud's points, chosen
     /// by position key from the tile store, in tile order.
     fn preview_sample(&self) -> Result<Vec<DVec3>> {
-        sample_tiles(&self.ws, &self.manifest, &self.tiles, crate::preview::PREVIEW_POINTS)
+        sample_tiles(&self.ws, &self.manifest, &self.tiles, crate::preview::PREVIEW_POINTS, &self.opts.cancel)
     }
 }
 
-/// A run's finished curves, kept in its working data a batch at a time (see [`Finished`]).
+/// A run's finished curves, kept in its working data a batch at a time (see [`Finished`]),
+/// read until `cancel` is set (then [`Error::Interrupted`]: an output being written is left
+/// under its temporary name, and written again when the run is resumed).
 pub(super) struct FinishedCurves<'a> {
     ws: &'a Workspace,
     batches: u32,
+    cancel: &'a crate::cancel::Cancel,
 }
 
 impl Curves for FinishedCurves<'_> {
     fn each(&self, f: &mut dyn FnMut(&Polyline) -> Result<()>) -> Result<()> {
         for b in 0..self.batches {
-            records::read::<Finished>(self.ws, b)?.0.iter().try_for_each(&mut *f)?;
+            for (k, c) in records::read::<Finished>(self.ws, b)?.0.iter().enumerate() {
+                if k % 256 == 0 {
+                    self.cancel.check()?;
+                }
+                f(c)?;
+            }
         }
-        Ok(())
+        self.cancel.check()
     }
 }
 

@@ -162,7 +162,7 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
     if let Step::Waiting(why) = wait_for_plan(&ws, opts, worker)? {
         return Ok(WorkerStep::Waiting(why));
     }
-    let planned = plan(&mut ws, job, || found.bounds(filter), opts, worker)?;
+    let planned = plan(&mut ws, job, || found.bounds(filter, &opts.cancel), opts, worker)?;
     // (Worker 0 writes the outputs, again if an output setting changed; the others had nothing
     // left to do once it finished, and were told to wait for ever.)
     if planned.manifest.finished && !Worker::leads(worker) {

@@ -138,13 +138,19 @@ pub(crate) fn load_counted(store: Store, grid: &Grid, t: u32, l: &Loading) -> Re
     let averaged = l.average > 0.0 && keep < 1.0;
     // The points within `average` of a point of the halo are read too.
     let reach = if averaged { halo + l.average } else { halo };
+    // (The store's reads stop between frames once a cancel is set; the steps after them are
+    // checked between, a few hundredths of a second each on a tile of a million points.)
     let (mut tp, own) = read_tile(store, grid, t, l, reach)?;
     let before = own.len() as u64;
     let own = drop_duplicates(&mut tp, own);
+    store.check()?;
     let exact = before - own.len() as u64;
     let own = if l.near > 0.0 { drop_near(&mut tp, own, l.near, |p| within(&core, reach, p)) } else { own };
+    store.check()?;
     let dropped = Dropped { exact, near: before - exact - own.len() as u64 };
-    Ok((flagged(tp, own, &core, l), dropped))
+    let flagged = flagged(tp, own, &core, l, store);
+    store.check()?;
+    Ok((flagged, dropped))
 }
 
 /// Reads tile `t`'s own points and those of the tiles around within `reach` of its core
@@ -185,8 +191,9 @@ fn read_tile(store: Store, grid: &Grid, t: u32, l: &Loading, reach: f64) -> Resu
 }
 
 /// The loaded tile `tp` with its core flags (its own points `own`, drawn for evaluation), the
-/// kept points averaged over balls if the loading averages (see [`load`]).
-fn flagged(tp: TilePoints, own: std::ops::Range<usize>, core: &crate::points::Bounds, l: &Loading) -> (TilePoints, Vec<bool>) {
+/// kept points averaged over balls if the loading averages (see [`load`]); once `store`'s
+/// cancel is set, the means not taken yet are left out (the caller checks it after).
+fn flagged(tp: TilePoints, own: std::ops::Range<usize>, core: &crate::points::Bounds, l: &Loading, store: Store) -> (TilePoints, Vec<bool>) {
     let (halo, keep) = (l.halo, l.keep);
     let averaged = l.average > 0.0 && keep < 1.0;
     let kept = |key| keep >= 1.0 || keep_point(key, keep, l.seed);
@@ -207,7 +214,16 @@ fn flagged(tp: TilePoints, own: std::ops::Range<usize>, core: &crate::points::Bo
     // they are in the cache.)
     let mut by_cell: Vec<(u128, usize)> = chosen.iter().enumerate().map(|(n, &k)| (Balls::key(Balls::cell(tp.xyz[k], l.average), balls.base), n)).collect();
     by_cell.par_sort_unstable();
-    let means: Vec<DVec3> = by_cell.par_iter().map(|&(_, n)| balls.mean_around(tp.xyz[chosen[n]])).collect();
+    // (In runs of a few thousand, between which a cancel is seen: on a cloud thinned to a few
+    // percent, a ball holds hundreds of points.)
+    let (balls, xyz, chosen) = (&balls, &tp.xyz, &chosen);
+    let means: Vec<DVec3> = by_cell
+        .par_chunks(4096)
+        .flat_map_iter(|run| {
+            let go = !store.cancelled();
+            run.iter().map(move |&(_, n)| if go { balls.mean_around(xyz[chosen[n]]) } else { DVec3::ZERO })
+        })
+        .collect();
     let mut xyz = vec![DVec3::ZERO; chosen.len()];
     for (&(_, n), m) in by_cell.iter().zip(means) {
         xyz[n] = m;
@@ -414,7 +430,9 @@ impl CloudLoading<'_> {
     pub(crate) fn load(&self, t: u32, idle: bool) -> Result<(Cloud, Vec<bool>)> {
         let (tp, core) = load(self.store, self.grid, t, &self.loading)?;
         let origin = tile_origin(&tp);
-        Ok((Cloud::gridded(&tp.xyz, &tp.gid, origin, self.cell_side, idle).cancelled_by(self.cancel), core))
+        let cloud = Cloud::gridded(&tp.xyz, &tp.gid, origin, self.cell_side, idle).cancelled_by(self.cancel);
+        self.cancel.check()?;
+        Ok((cloud, core))
     }
 }
 

@@ -15,14 +15,24 @@ use std::path::Path;
 
 /// Tile edge length for a budget: tiles hold about `memory / BYTES_PER_POINT` points (at most
 /// [`MAX_TILE_POINTS`], at least [`MIN_TILE_POINTS`]), assuming the points spread evenly over the footprint (2D) or the
-/// volume (3D) of the bounds.
+/// volume (3D) of the bounds. An extent narrower than a quarter of the tiles so sized is one
+/// tile across, and the tiles are sized over the others: a corridor's grid of square tiles as
+/// wide as the footprint's area asks for has a tile every few metres along it, each holding a
+/// sliver of the points (30 k points on a strip 10 km long and 1 m wide made 3,163 tiles of 10
+/// points, and a run of minutes).
 pub(crate) fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
     let per_tile = (memory / BYTES_PER_POINT).clamp(MIN_TILE_POINTS, MAX_TILE_POINTS) as f64;
     let ext = DVec3::from(b.max) - DVec3::from(b.min);
     let ext = ext.max(DVec3::splat(1e-9));
     let tiles = (points as f64 / per_tile).max(1.0);
     let flat = ext.z < 0.25 * ext.x.max(ext.y);
-    let size = if flat { (ext.x * ext.y / tiles).sqrt() } else { (ext.x * ext.y * ext.z / tiles).cbrt() };
+    let mut size = if flat { (ext.x * ext.y / tiles).sqrt() } else { (ext.x * ext.y * ext.z / tiles).cbrt() };
+    let mut sides = if flat { vec![ext.x, ext.y] } else { vec![ext.x, ext.y, ext.z] };
+    sides.sort_by(f64::total_cmp);
+    while sides.len() > 1 && sides[0] < 0.25 * size {
+        sides.remove(0);
+        size = if sides.len() == 2 { (sides[0] * sides[1] / tiles).sqrt() } else { sides[0] / tiles };
+    }
     // Never more than needed to hold everything in one tile.
     size.min(ext.max_element() * 1.001)
 }
@@ -165,4 +175,25 @@ fn plan_anew(ws: &mut Workspace, job: Job, bounds: impl FnOnce() -> Result<(Boun
     };
     manifest::save(ws, &m)?;
     Ok(Planned { manifest: m, resumed: false })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A cube's tiles are sized as before (no extent is narrow); a strip far longer than wide
+    /// is one tile across, and its tiles hold the points the budget asks for.
+    #[test]
+    fn a_narrow_extent_is_one_tile_across() {
+        let b = |max: [f64; 3]| Bounds { min: [0.0; 3], max };
+        let memory = 256 << 20;
+        let per_tile = (memory / BYTES_PER_POINT) as f64;
+        let cube = tile_size_for(&b([1.0, 1.0, 1.0]), 4_000_000, memory);
+        assert_eq!(cube, (1.0 * 1.0 * 1.0 / (4e6 / per_tile)).cbrt());
+        let strip = tile_size_for(&b([10_000.0, 1.0, 0.01]), 30_000, memory);
+        assert!(strip >= 10_000.0, "{strip}");
+        let long = tile_size_for(&b([10_000.0, 1.0, 0.01]), 4_000_000, memory);
+        assert!((long / (10_000.0 / (4e6 / per_tile)) - 1.0).abs() < 1e-12, "{long}");
+        assert_eq!(Grid::new(&b([10_000.0, 1.0, 0.01]), long).len(), (4e6 / per_tile).floor() as usize + 1);
+    }
 }

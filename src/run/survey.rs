@@ -61,6 +61,8 @@ impl Run<'_> {
             .tiles
             .par_iter()
             .map(|&t| {
+                // (A tile's edges a time: thousands of tiles took seconds.)
+                self.opts.cancel.check()?;
                 let e = self.stored_edges(t, q)?;
                 let mut layers = Layers::new(cell, r.step);
                 e.edges.iter().for_each(|x| layers.add(x.p - anchor));
@@ -94,6 +96,7 @@ impl Run<'_> {
         let (census, parts) = read
             .par_iter()
             .map(|&(k, t)| {
+                self.opts.cancel.check()?;
                 let e = self.stored_edges(t, q)?;
                 let mut census = Census::new(side);
                 e.edges.iter().for_each(|x| census.add(x.p - origin));

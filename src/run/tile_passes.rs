@@ -63,7 +63,7 @@ impl Run<'_> {
         }
         let t = Instant::now();
         for round in 1.. {
-            let store = Store::new(&self.ws)?;
+            let store = Store::new(&self.ws)?.cancelled_by(&self.opts.cancel);
             store.clear()?;
             let grid = self.manifest.grid.clone();
             let tiles = Bucketer::new(&grid, store, budgets::bucket_buffer(self.opts.memory));
@@ -149,7 +149,7 @@ impl Run<'_> {
     /// loaded again, wider). Returns every tile's record.
     fn stats_pass<R: Record + From<Stats> + Send>(&mut self, params: &Params, near: f64) -> Result<Step<Vec<R>>> {
         self.repair::<R>()?;
-        let (store, grid) = (Store::new(&self.ws)?, &self.manifest.grid);
+        let (store, grid) = (Store::new(&self.ws)?.cancelled_by(&self.opts.cancel), &self.manifest.grid);
         let tile_points = &self.manifest.tile_points;
         let fullest = *self.tiles.iter().max_by_key(|&&t| (tile_points[t as usize], std::cmp::Reverse(t))).expect("a tile with points");
         let mut probe = TilePoints::default();
@@ -158,7 +158,7 @@ impl Run<'_> {
         let own = 0..probe.xyz.len();
         pass::drop_duplicates(&mut probe, own);
         self.opts.cancel.check()?;
-        let kappa0 = crate::spacing::spacing(&probe.xyz, 2000);
+        let kappa0 = crate::spacing::spacing_or_cancel(&probe.xyz, 2000, &self.opts.cancel)?;
         drop(probe);
         let total: u64 = tile_points.iter().sum();
         let seed = params.seed.unwrap_or(crate::extract::params::DEFAULT_SEED);
@@ -208,7 +208,13 @@ impl Run<'_> {
             average_share,
             near: r.near,
         };
-        Ok(CloudLoading { store: Store::new(&self.ws)?, grid: &self.manifest.grid, loading, cell_side: r.cell_side(), cancel: &self.opts.cancel })
+        Ok(CloudLoading {
+            store: Store::new(&self.ws)?.cancelled_by(&self.opts.cancel),
+            grid: &self.manifest.grid,
+            loading,
+            cell_side: r.cell_side(),
+            cancel: &self.opts.cancel,
+        })
     }
 
     /// Residual pass (stage 1); returns tau, the mean residual over all points (an exact sum:

@@ -168,3 +168,47 @@ fn near_copies_are_collapsed_and_counted() {
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(tiled.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["counts"]["near_duplicates"].as_u64(), Some(cube.len() as u64), "in tiles");
 }
+
+/// A cloud far longer than it is wide (a corridor, or points on a few lines) was tiled in
+/// squares as wide as its footprint's area asked for: 30 k points on a strip 10,000 long and 1
+/// wide made 100 tiles of 300 points (3,163 of 10 on one 1e7 long), and minutes of per-tile
+/// work. It is one tile across, and its tiles are sized along its length.
+#[test]
+fn a_long_thin_cloud_is_tiled_along_its_length() {
+    let d = tempfile::tempdir().unwrap();
+    let mut s = 61u64;
+    let mut r = || {
+        s = s.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let strip: Vec<DVec3> = (0..30_000).map(|_| DVec3::new(10_000.0 * r(), r(), 0.01 * r())).collect();
+    let p = d.path().join("strip.ply");
+    write_ply(&p, &strip);
+    let run = d.path().join("run");
+    let t = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(["extract", p.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("report.json")).unwrap()).unwrap();
+    assert!(report["tiles"].as_u64().unwrap() <= 2, "{} tiles for 30 k points", report["tiles"]);
+    assert!(t.elapsed().as_secs() < 20, "{:?}", t.elapsed());
+}
+
+/// `crease info` reads one block of a file; the copies among the points of that block are
+/// counted and said to be of the block, not guessed for the file.
+#[test]
+fn info_counts_the_copies_in_the_block_it_reads() {
+    let d = tempfile::tempdir().unwrap();
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let twice: Vec<DVec3> = cube.iter().chain(&cube[..5_000]).copied().collect();
+    for (name, points, copies) in [("plain.ply", &cube, 0), ("twice.ply", &twice, 5_000)] {
+        let p = d.path().join(name);
+        write_ply(&p, points);
+        let out = Command::new(env!("CARGO_BIN_EXE_crease")).args(["info", "--json", p.to_str().unwrap()]).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v[0]["sample_copies"].as_u64(), Some(copies), "{name}");
+        let text = Command::new(env!("CARGO_BIN_EXE_crease")).args(["info", p.to_str().unwrap()]).output().unwrap();
+        let text = String::from_utf8_lossy(&text.stdout);
+        assert_eq!(text.contains(&format!("copies   {copies} of those 25000 points")), copies > 0, "{text}");
+    }
+}

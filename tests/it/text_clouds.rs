@@ -66,3 +66,21 @@ fn text_clouds_give_the_curves_of_the_same_points_in_ply() {
         assert!(err.trim_end().lines().count() == 1 && err.contains(name) && err.contains(says), "{err}");
     }
 }
+
+/// A spreadsheet's export with decimal commas and semicolons between the values ("0,5;1,25;2")
+/// was read as six values a line, x, y and z the first three: integers and digit strings, a
+/// strip ten million units long that took minutes to tile. It is refused, naming the line.
+#[test]
+fn decimal_commas_are_refused_naming_the_line() {
+    let d = tempfile::tempdir().unwrap();
+    let p = d.path().join("comma.csv");
+    let lines: String = (0..2000).map(|k| format!("{},{:07};0,5;{},25\n", k % 2, (k * 4999) % 9_999_991, k % 3)).collect();
+    std::fs::write(&p, format!("x;y;z\n{lines}")).unwrap();
+    let run = d.path().join("run");
+    for args in [vec!["info", p.to_str().unwrap()], vec!["extract", p.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]] {
+        let (code, err) = crease(&args);
+        assert_eq!(code, crease::error::exit::DATA, "{args:?}: {err}");
+        assert!(err.trim_end().lines().count() == 1 && err.contains("comma.csv") && err.contains("line 2") && err.contains("decimal"), "{err}");
+    }
+    assert!(!run.join("curves.obj").exists());
+}
