@@ -368,6 +368,28 @@ pub(crate) fn resolve(params: &Params, stats: &[PointStats]) -> Resolved {
     r
 }
 
+/// Refuses a length the user gave (`--kappa`, `--fit-radius`, `--rmls-radius`, `--step`)
+/// below a hundredth of the spacing the statistics `stats` measured, or beyond the cloud's
+/// `diagonal`: each was taken, and gave no curve without a word, `--step 1e-15` after a
+/// minute of growing. (Checked once the statistics are in: before, the cloud's spacing is not
+/// known.)
+pub(crate) fn check_given_lengths(params: &Params, stats: &[PointStats], diagonal: f64) -> crate::error::Result<()> {
+    let spacing = median(&mut stats.iter().map(|s| s.spacing).collect::<Vec<_>>());
+    if !(spacing > 0.0 && spacing.is_finite() && diagonal > 0.0 && diagonal.is_finite()) {
+        return Ok(());
+    }
+    let given = [("--kappa", params.kappa), ("--fit-radius", params.fit_radius), ("--rmls-radius", params.rmls_radius), ("--step", params.step)];
+    for (name, v) in given.into_iter().filter_map(|(n, v)| v.map(|v| (n, v))) {
+        if v < 0.01 * spacing || v > diagonal {
+            return Err(crate::error::Error::Usage(format!(
+                "{name} {v}: outside what this cloud allows, a hundredth of its point spacing ({:.3e}) to its diagonal ({diagonal:.3e}); give another value with --force to start the run over",
+                0.01 * spacing
+            )));
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

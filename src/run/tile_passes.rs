@@ -135,6 +135,7 @@ impl Run<'_> {
     fn resolved(&mut self, params: &Params, stats: Vec<Stats>, near: f64, t: Instant) -> Result<Step<Resolved>> {
         self.manifest.duplicates = stats.iter().fold([0, 0], |a, s| [a[0] + s.dropped.exact, a[1] + s.dropped.near]);
         let all: Vec<_> = stats.into_iter().flat_map(|s| s.stats).collect();
+        crate::extract::params::check_given_lengths(params, &all, self.manifest.diag)?;
         let mut r = crate::extract::params::resolve(params, &all);
         r.near = near;
         self.manifest.resolved = Some(r.clone());

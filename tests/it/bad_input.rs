@@ -527,6 +527,28 @@ fn options_out_of_range_are_refused_by_the_library_as_by_the_command_line() {
     assert!(err.contains("--threads 10000: at most"), "{err}");
 }
 
+/// A length option far outside the cloud's scale (`--step 1e-15` grew for a minute, `--kappa
+/// 1e12` thinned the cloud to nothing) gave 0 curves with exit 0; it is refused once the
+/// statistics have measured the spacing, naming the option (exit 2), in seconds.
+#[test]
+fn lengths_far_outside_the_clouds_scale_are_refused() {
+    let d = tmp();
+    let las = d.path().join("cube.las");
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube.las"), &las).unwrap();
+    for (k, args) in [["--step", "1e-15"], ["--kappa", "1e12"], ["--fit-radius", "1e-9"], ["--rmls-radius", "50"]].iter().enumerate() {
+        let t = std::time::Instant::now();
+        let out = d.path().join(format!("run{k}"));
+        let (code, _, err) = crease(&[&["extract", las.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"][..], &args[..]].concat());
+        assert_eq!(code, exit::USAGE, "{args:?}: {err}");
+        assert!(err.trim_end().lines().count() == 1 && err.contains(&format!("{} {}", args[0], args[1].parse::<f64>().unwrap())), "{args:?}: {err}");
+        assert!(t.elapsed().as_secs() < 20, "{args:?}: {:?}", t.elapsed());
+        assert!(!out.join("curves.obj").exists());
+    }
+    // Within range, a given step is taken.
+    let (code, _, err) = crease(&["extract", las.to_str().unwrap(), "-o", d.path().join("ok").to_str().unwrap(), "-q", "--step", "0.02"]);
+    assert_eq!(code, 0, "{err}");
+}
+
 /// A run refused at its start leaves no run directory behind (it once left one holding only
 /// `lock`), and a finished or failed run, lone or by workers, keeps no lock file.
 #[test]
