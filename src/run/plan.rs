@@ -18,8 +18,7 @@ use std::path::Path;
 /// volume (3D) of the bounds. An extent narrower than a quarter of the tiles so sized is one
 /// tile across, and the tiles are sized over the others: a corridor's grid of square tiles as
 /// wide as the footprint's area asks for has a tile every few metres along it, each holding a
-/// sliver of the points (30 k points on a strip 10 km long and 1 m wide made 3,163 tiles of 10
-/// points, and a run of minutes).
+/// sliver of the points, and a run pays the halo and the overhead of every one of them.
 pub(crate) fn tile_size_for(b: &Bounds, points: u64, memory: u64) -> f64 {
     let per_tile = (memory / BYTES_PER_POINT).clamp(MIN_TILE_POINTS, MAX_TILE_POINTS) as f64;
     let ext = DVec3::from(b.max) - DVec3::from(b.min);
