@@ -263,6 +263,12 @@ pub fn scan_bounds(path: &Path, filter: &Filter) -> Result<(Bounds, u64)> {
 /// [`scan_bounds`], stopped between chunks with [`crate::Error::Interrupted`] once `cancel` is
 /// set (a text cloud of millions of points takes seconds to read).
 pub(crate) fn scan_bounds_or_cancel(path: &Path, filter: &Filter, cancel: &crate::cancel::Cancel) -> Result<(Bounds, u64)> {
+    scan_bounds_declared(path, filter, cancel).map(|(b, n, _)| (b, n))
+}
+
+/// [`scan_bounds_or_cancel`], with the count a text cloud's PTS count lines declare, if it has
+/// any (to be checked against the points it holds).
+pub(crate) fn scan_bounds_declared(path: &Path, filter: &Filter, cancel: &crate::cancel::Cancel) -> Result<(Bounds, u64, Option<u64>)> {
     let mut reader = PointReader::open(path, &Filter { text: filter.text, ..Filter::keep_all() })?.cancelled_by(cancel);
     let mut chunk = PointChunk::default();
     let mut b = Bounds::EMPTY;
@@ -274,7 +280,8 @@ pub(crate) fn scan_bounds_or_cancel(path: &Path, filter: &Filter, cancel: &crate
         }
         n += chunk.len() as u64;
     }
-    Ok((b, n))
+    let declared = if let Inner::Text(t) = &reader.inner { t.declared() } else { None };
+    Ok((b, n, declared))
 }
 
 enum Inner {

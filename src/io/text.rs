@@ -4,7 +4,8 @@
 //! Without a column spec the layout is detected: a first line with names (`x`, `y`, `z`,
 //! optionally `classification` or `class`; quotes and a leading `//` allowed) says where the
 //! columns are; otherwise x, y and z are the first three values. A line holding a single
-//! integer is a PTS block's point count and is skipped. A data line that lacks a column, or
+//! integer is a PTS block's point count and is skipped (a run warns where the counts do not add
+//! up to the points the file holds). A data line that lacks a column, or
 //! whose value is not a number, is an error naming the line, as is a line longer than
 //! [`MAX_LINE`]. Windows line ends (CRLF) and a UTF-8 byte order mark are read as text.
 
@@ -99,6 +100,8 @@ pub(super) struct TextReader {
     pos: usize,
     line: u64,
     next: u64,
+    /// Points the PTS count lines read so far declare, if any were read.
+    declared: Option<u64>,
 }
 
 impl TextReader {
@@ -137,12 +140,17 @@ impl TextReader {
             scanners: vec![],
         };
         let pos = if map.starts_with(BOM) { BOM.len() } else { 0 };
-        Ok(TextReader { path: path.to_path_buf(), header, map: Some(map), cols, pos, line: 0, next: 0 })
+        Ok(TextReader { path: path.to_path_buf(), header, map: Some(map), cols, pos, line: 0, next: 0, declared: None })
     }
 
     /// The file's header (count and bounds unknown until the points are read).
     pub(super) fn header(&self) -> &CloudHeader {
         &self.header
+    }
+
+    /// The points the PTS count lines read so far declare, if any were read.
+    pub(super) fn declared(&self) -> Option<u64> {
+        self.declared
     }
 
     /// Reads up to `max` points into `out` (filtered); returns the number of records read.
@@ -196,7 +204,13 @@ impl TextReader {
                 n = k + 1;
             }
             // (Blank lines, and a PTS block's point count: one integer alone.)
-            if n == 0 || (n == 1 && text.parse::<u64>().is_ok()) {
+            if n == 0 {
+                continue;
+            }
+            if n == 1
+                && let Ok(count) = text.parse::<u64>()
+            {
+                self.declared = Some(self.declared.unwrap_or(0).saturating_add(count));
                 continue;
             }
             if n < need {

@@ -86,7 +86,7 @@ impl InputFiles {
     /// from the headers, or from the points where a header's bounds are missing (PLY, E57,
     /// text), not finite or inverted.
     /// Stops with [`Error::Interrupted`] once `cancel` is set.
-    pub(super) fn bounds(&self, filter: &Filter, cancel: &crate::cancel::Cancel) -> Result<(Bounds, u64)> {
+    pub(super) fn bounds(&mut self, filter: &Filter, cancel: &crate::cancel::Cancel) -> Result<(Bounds, u64)> {
         let mut b = Bounds::EMPTY;
         let mut declared = 0;
         for h in &self.headers {
@@ -94,7 +94,10 @@ impl InputFiles {
                 b.union(&h.bounds);
                 declared += h.count;
             } else {
-                let (scanned, n) = io::scan_bounds_or_cancel(&h.path, filter, cancel)?;
+                let (scanned, n, said) = io::scan_bounds_declared(&h.path, filter, cancel)?;
+                if let Some(said) = said.filter(|&s| s != n) {
+                    self.warnings.push(format!("{}: its PTS count lines declare {said} points; it holds {n}, which are read", h.path.display()));
+                }
                 b.union(&scanned);
                 // (Text clouds declare no count: the scan's stands in.)
                 declared += if h.count > 0 { h.count } else { n };

@@ -155,7 +155,7 @@ fn run_in(inputs: &[PathBuf], dir: &Path, params: &Params, filter: &Filter, opts
     let started = Instant::now();
     params.validate()?;
     opts.validate()?;
-    let found = InputFiles::gather(inputs, dir, opts)?;
+    let mut found = InputFiles::gather(inputs, dir, opts)?;
     let job = found.job(params, filter, opts)?;
     let mut ws = Workspace::disk(dir)?;
     ws.lock(worker.map(|w| w.index))?;

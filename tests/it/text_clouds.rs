@@ -84,3 +84,24 @@ fn decimal_commas_are_refused_naming_the_line() {
     }
     assert!(!run.join("curves.obj").exists());
 }
+
+/// A PTS file whose count line declares far more points than it holds (5e9 over 20,000 lines)
+/// was read without a word. Its points are read, and a warning names the file and both counts;
+/// a count that matches says nothing.
+#[test]
+fn a_pts_count_that_is_not_the_points_held_is_warned_about() {
+    let d = tempfile::tempdir().unwrap();
+    let cube = crease::synth::sample(&crease::synth::shape("cube", 90.0).unwrap(), &crease::synth::SynthOptions { n: 20_000, ..Default::default() });
+    let body: String = cube.iter().map(|p| format!("{} {} {} 0 255 255 255\n", p.x, p.y, p.z)).collect();
+    for (name, count, warned) in [("wrong.pts", 5_000_000_000u64, true), ("right.pts", cube.len() as u64, false)] {
+        let p = d.path().join(name);
+        std::fs::write(&p, format!("{count}\n{body}")).unwrap();
+        let out = d.path().join(format!("run_{name}"));
+        let (code, err) = crease(&["extract", p.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(crease::curves::read_obj(&out.join("curves.obj")).unwrap().len(), 12, "{name}");
+        let says = format!("{}: its PTS count lines declare {count} points; it holds {}", p.display(), cube.len());
+        assert_eq!(err.contains(&says), warned, "{name}: {err}");
+        assert_eq!(err.contains("PTS count"), warned, "{name}: {err}");
+    }
+}
