@@ -57,18 +57,22 @@ def run(binary, cloud, out, extra, sig_at=None, sig=signal.SIGTERM):
     return rc, lines, sent, ended
 
 
-def stage_at(lines, t):
-    """The stage that a moment `t` of a run falls in, from its progress lines."""
-    stage = "start"
+def progress(lines):
+    """The progress lines of a run's stderr as (time, stage name, what it says)."""
     for at, line in lines:
-        if at > t:
-            break
         if not line.startswith("crease: "):
             continue
         parts = line[len("crease: "):].split(": ", 1)
-        if len(parts) != 2:
-            continue
-        name, what = parts
+        if len(parts) == 2:
+            yield at, parts[0], parts[1]
+
+
+def stage_at(lines, t):
+    """The stage that a moment `t` of a run falls in, from its progress lines."""
+    stage = "start"
+    for at, name, what in progress(lines):
+        if at > t:
+            break
         stage = f"after {name}" if what.startswith("done") else name
     return stage
 
@@ -77,13 +81,7 @@ def segments(lines, total):
     """The run's timeline as (name, start, end): each stage, and the gaps between a stage's end
     and the next one's start, from the progress lines that begin or end a stage."""
     events = [(0.0, "start")]
-    for at, line in lines:
-        if not line.startswith("crease: "):
-            continue
-        parts = line[len("crease: "):].split(": ", 1)
-        if len(parts) != 2:
-            continue
-        name, what = parts
+    for at, name, what in progress(lines):
         if what.startswith("done"):
             events.append((at, f"after {name}"))
         elif "/" not in what.split(" ")[0]:
