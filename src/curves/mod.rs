@@ -48,6 +48,7 @@
 //! its edge points have. Corners, and the rare vertex with no edge point near it, take those of
 //! the nearest vertex along the curve that has them; a curve with none at all keeps zeros.
 
+mod circle;
 mod dxf;
 mod geojson;
 mod gpkg;

@@ -127,13 +127,19 @@ fn line_error(pts: &[DVec3]) -> f64 {
 
 /// The arc through the ends of `pts` and their middle vertex, if every vertex lies within
 /// `tol` of it and they follow it in order: (centre, axis, radius, sweep in radians, error).
+/// (The least-squares circle through the ends bends to take in the start of a tangent line, so
+/// the pieces cut with it stray from their joints.)
 fn arc_fit(pts: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64, f64)> {
-    let m = pts.len();
-    if m < 4 {
+    if pts.len() < 4 {
         return None;
     }
-    let (a, b) = (pts[0], pts[m - 1]);
-    let (centre, axis, r) = circle_through(a, pts[m / 2], b)?;
+    arc_on(pts, tol, circle_through(pts[0], pts[pts.len() / 2], pts[pts.len() - 1])?)
+}
+
+/// The arc of the circle `(centre, axis, r)` from the first of `pts` to the last, if every
+/// vertex lies within `tol` of it and they follow it in order.
+fn arc_on(pts: &[DVec3], tol: f64, (centre, axis, r): (DVec3, DVec3, f64)) -> Option<(DVec3, DVec3, f64, f64, f64)> {
+    let (a, b) = (pts[0], pts[pts.len() - 1]);
     let mut last = 0.0;
     let mut error = 0.0f64;
     for &p in &pts[1..] {
@@ -150,14 +156,14 @@ fn arc_fit(pts: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64, f64)> {
     Some((centre, axis, r, last, error))
 }
 
-/// A closed curve's vertices as one circle, if they all lie within `tol` of it and go round
-/// it once, in order.
+/// A closed curve's vertices as one circle, their least-squares one, if they all lie within
+/// `tol` of it and go round it once, in order.
 fn circle_fit(v: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64)> {
     let n = v.len();
     if n < 6 {
         return None;
     }
-    let (centre, axis, r) = circle_through(v[0], v[n / 3], v[2 * n / 3])?;
+    let (centre, axis, r) = super::circle::fit_circle(v)?;
     let mut last = 0.0;
     let mut error = 0.0f64;
     for &p in &v[1..] {
@@ -283,11 +289,13 @@ fn one_spline_if_simpler(run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Pie
 const MAX_CONTROL_POINTS: usize = 4096;
 
 /// Types one run between corners: greedily, the longest line or arc from each piece's start
-/// (the line where it reaches as far); runs of single steps that neither holds beyond become
-/// one spline piece, or a polyline piece where no spline holds.
+/// (the line where it reaches as far), then each joint between two such pieces settled (see
+/// [`settle_joints`]); runs of single steps that neither holds beyond become one spline piece,
+/// or a polyline piece where no spline holds.
 fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piece>) {
     let pts: Vec<DVec3> = run.iter().map(|&i| v[i]).collect();
-    let m = pts.len();
+    let mut spans = greedy_spans(&pts, tol);
+    settle_joints(&mut spans, &pts, tol);
     let piece = |kind, i: usize, j: usize| Piece {
         curve,
         kind,
@@ -302,56 +310,128 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
         spline: None,
         error: 0.0,
     };
-    let mut i = 0;
-    let mut loose: Option<usize> = None;
-    let flush = |loose: &mut Option<usize>, to: usize, out: &mut Vec<Piece>| {
-        let Some(from) = loose.take() else { return };
-        if to - from == 1 {
-            out.push(Piece { error: line_error(&pts[from..=to]), ..piece(Kind::Line, from, to) });
-        } else if let Some((s, error)) = spline::fit(&pts[from..=to], tol, MAX_CONTROL_POINTS) {
-            out.push(Piece { spline: Some(s), error, ..piece(Kind::Spline, from, to) });
-        } else {
-            out.push(piece(Kind::Polyline, from, to));
-        }
-    };
-    while i + 1 < m {
-        let jl = farthest(i + 1, m - 1, |j| line_error(&pts[i..=j]) <= tol);
-        // (An arc is taken only where it reaches farther than the line: none can where the
-        // line reaches the run's end.)
-        let arc = if jl + 1 < m && i + 3 < m && arc_fit(&pts[i..=i + 3], tol).is_some() {
-            let ja = farthest(i + 3, m - 1, |j| arc_fit(&pts[i..=j], tol).is_some());
-            arc_fit(&pts[i..=ja], tol).map(|fit| (ja, fit))
-        } else {
-            None
-        };
-        // (An arc that bows out from its chord by no more than twice the tolerance cannot be
-        // told from a line at that tolerance: the line, the simpler type, is taken.)
-        let bows = |r: f64, sweep: f64| r * (1.0 - (0.5 * sweep.min(std::f64::consts::PI)).cos()) > 2.0 * tol;
-        match arc {
-            Some((ja, (centre, axis, r, sweep, error))) if ja > jl && bows(r, sweep) => {
-                flush(&mut loose, i, out);
+    for &(kind, i, j) in &spans {
+        match kind {
+            Kind::Line => out.push(Piece { error: line_error(&pts[i..=j]), ..piece(Kind::Line, i, j) }),
+            Kind::Arc => {
+                let (centre, axis, r, sweep, error) = arc_fit(&pts[i..=j], tol).expect("a settled arc holds");
                 out.push(Piece {
                     centre: Some(centre),
                     axis: Some(axis),
                     radius: Some(r),
                     sweep_deg: Some(sweep.to_degrees()),
                     error,
-                    ..piece(Kind::Arc, i, ja)
+                    ..piece(Kind::Arc, i, j)
                 });
-                i = ja;
             }
-            _ if jl == i + 1 && m > 2 => {
-                loose.get_or_insert(i);
-                i = jl;
-            }
-            _ => {
-                flush(&mut loose, i, out);
-                out.push(Piece { error: line_error(&pts[i..=jl]), ..piece(Kind::Line, i, jl) });
-                i = jl;
-            }
+            _ if j - i == 1 => out.push(Piece { error: line_error(&pts[i..=j]), ..piece(Kind::Line, i, j) }),
+            _ => match spline::fit(&pts[i..=j], tol, MAX_CONTROL_POINTS) {
+                Some((s, error)) => out.push(Piece { spline: Some(s), error, ..piece(Kind::Spline, i, j) }),
+                None => out.push(piece(Kind::Polyline, i, j)),
+            },
         }
     }
-    flush(&mut loose, m - 1, out);
+}
+
+/// A piece of a run as (kind, first vertex, last vertex): a line, an arc, or (as `Polyline`)
+/// loose steps that neither holds beyond one step.
+type Span = (Kind, usize, usize);
+
+/// The greedy pass of [`type_run`]: from each piece's start, the line or arc that reaches
+/// farthest; single steps that neither holds beyond gathered into loose spans.
+fn greedy_spans(pts: &[DVec3], tol: f64) -> Vec<Span> {
+    let m = pts.len();
+    let mut spans = Vec::new();
+    let mut i = 0;
+    let mut loose: Option<usize> = None;
+    let flush = |loose: &mut Option<usize>, to: usize, spans: &mut Vec<Span>| {
+        if let Some(from) = loose.take() {
+            spans.push((Kind::Polyline, from, to));
+        }
+    };
+    while i + 1 < m {
+        let jl = farthest(i + 1, m - 1, |j| line_error(&pts[i..=j]) <= tol);
+        // (An arc is taken only where it reaches farther than the line: none can where the
+        // line reaches the run's end.)
+        let ja = if jl + 1 < m && i + 3 < m && arc_fit(&pts[i..=i + 3], tol).is_some() {
+            farthest(i + 3, m - 1, |j| arc_fit(&pts[i..=j], tol).is_some())
+        } else {
+            i
+        };
+        if ja > jl && arc_holds(&pts[i..=ja], tol).is_some() {
+            flush(&mut loose, i, &mut spans);
+            spans.push((Kind::Arc, i, ja));
+            i = ja;
+        } else if jl == i + 1 && m > 2 {
+            loose.get_or_insert(i);
+            i = jl;
+        } else {
+            flush(&mut loose, i, &mut spans);
+            spans.push((Kind::Line, i, jl));
+            i = jl;
+        }
+    }
+    flush(&mut loose, m - 1, &mut spans);
+    spans
+}
+
+/// The sum of squared distances of `pts` from the arc through their ends and middle vertex,
+/// if that arc holds within `tol` and bows out from its chord by more than twice `tol`: one
+/// that bows less cannot be told from a line at that tolerance, and the line, the simpler
+/// type, is taken.
+fn arc_holds(pts: &[DVec3], tol: f64) -> Option<f64> {
+    let (centre, axis, r, sweep, _) = arc_fit(pts, tol)?;
+    let bows = r * (1.0 - (0.5 * sweep.min(std::f64::consts::PI)).cos()) > 2.0 * tol;
+    bows.then(|| pts.iter().map(|&p| off_circle(p, centre, axis, r).powi(2)).sum())
+}
+
+/// The sum of squared distances of `pts` from the segment between their ends, if every one
+/// lies within `tol` of it.
+fn line_holds(pts: &[DVec3], tol: f64) -> Option<f64> {
+    let (a, b) = (pts[0], pts[pts.len() - 1]);
+    let mut sse = 0.0;
+    for &p in pts {
+        let d = crate::curves::segment_distance(p, a, b);
+        if d > tol {
+            return None;
+        }
+        sse += d * d;
+    }
+    Some(sse)
+}
+
+/// Moves each joint between two lines or arcs to the vertex where both still hold and leave
+/// the least sum of squared distances (the fit that noise of equal spread on every vertex makes
+/// likeliest). The greedy pass ends a piece where it stops holding, which at a tangent joint is
+/// past the joint by as far as the tolerance lets one shape pass for the other: an arc that runs
+/// on along a line, or a line that cuts into an arc. A joint moves at most the shorter piece's
+/// length, each piece keeping the vertices its kind needs.
+fn settle_joints(spans: &mut [Span], pts: &[DVec3], tol: f64) {
+    let holds = |kind: Kind, i: usize, j: usize| match kind {
+        Kind::Line if j > i => line_holds(&pts[i..=j], tol),
+        Kind::Arc if j >= i + 3 => arc_holds(&pts[i..=j], tol),
+        _ => None,
+    };
+    let fitted = |kind: Kind| matches!(kind, Kind::Line | Kind::Arc);
+    for s in 1..spans.len() {
+        let ((pk, a, k), (qk, _, b)) = (spans[s - 1], spans[s]);
+        if !fitted(pk) || !fitted(qk) {
+            continue;
+        }
+        let reach = (k - a).min(b - k);
+        let cost = |k: usize| Some(holds(pk, a, k)? + holds(qk, k, b)?);
+        let Some(mut best) = cost(k) else { continue };
+        let mut at = k;
+        for j in k.saturating_sub(reach).max(a + 1)..=(k + reach).min(b - 1) {
+            if let Some(c) = cost(j)
+                && c < best
+            {
+                (best, at) = (c, j);
+            }
+        }
+        spans[s - 1].2 = at;
+        spans[s].1 = at;
+    }
 }
 
 /// The largest `j` in `lo..=hi` for which `ok(j)` holds, given that it holds at `lo`: found by
