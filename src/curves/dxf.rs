@@ -135,6 +135,15 @@ pub fn write_dxf(path: &Path, curves: &(impl Curves + ?Sized), crs: &Crs, tol: f
     d.header.version = dxf::enums::AcadVersion::R2000;
     // (DXF has no CRS: its summary goes in the drawing's project name.)
     d.header.project_name = crs.summary();
+    // (The crate stamps a drawing with the time it was made and random GUIDs; fixed ones keep the
+    // same curves the same bytes, run after run and on resume.)
+    let epoch = chrono::NaiveDate::from_ymd_opt(2000, 1, 1).and_then(|d| d.and_hms_opt(0, 0, 0)).expect("a valid date");
+    let utc = epoch.and_utc();
+    // (The local dates are written as their wall-clock time: the same in any time zone.)
+    let local = chrono::TimeZone::from_local_datetime(&chrono::Local, &epoch).earliest().unwrap_or_else(|| utc.with_timezone(&chrono::Local));
+    (d.header.creation_date, d.header.update_date) = (local, local);
+    (d.header.creation_date_universal, d.header.update_date_universal) = (utc, utc);
+    (d.header.fingerprint_guid, d.header.version_guid) = (uuid::Uuid::nil(), uuid::Uuid::nil());
     for (name, colour) in [(LINES, 7), (ARCS, 3), (CIRCLES, 4), (SPLINES, 6), (CURVES, 1), (CORNERS, 5)] {
         d.add_layer(Layer { name: name.into(), color: dxf::Color::from_index(colour), ..Default::default() });
     }
@@ -345,6 +354,11 @@ mod tests {
             }
         }
         assert_eq!(seen, [LINES, CURVES, CORNERS]);
+        // The same curves written again, a moment later, are the same bytes.
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        let again = d.path().join("again.dxf");
+        write_dxf(&again, &[pl], &Crs::default(), 0.01).unwrap();
+        assert!(std::fs::read(&path).unwrap() == std::fs::read(&again).unwrap(), "two writes of the same curves differ");
     }
 
     #[test]
