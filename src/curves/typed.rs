@@ -130,16 +130,12 @@ fn line_error(pts: &[DVec3]) -> f64 {
 /// (The least-squares circle through the ends bends to take in the start of a tangent line, so
 /// the pieces cut with it stray from their joints.)
 fn arc_fit(pts: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64, f64)> {
-    if pts.len() < 4 {
+    let m = pts.len();
+    if m < 4 {
         return None;
     }
-    arc_on(pts, tol, circle_through(pts[0], pts[pts.len() / 2], pts[pts.len() - 1])?)
-}
-
-/// The arc of the circle `(centre, axis, r)` from the first of `pts` to the last, if every
-/// vertex lies within `tol` of it and they follow it in order.
-fn arc_on(pts: &[DVec3], tol: f64, (centre, axis, r): (DVec3, DVec3, f64)) -> Option<(DVec3, DVec3, f64, f64, f64)> {
-    let (a, b) = (pts[0], pts[pts.len() - 1]);
+    let (a, b) = (pts[0], pts[m - 1]);
+    let (centre, axis, r) = circle_through(a, pts[m / 2], b)?;
     let mut last = 0.0;
     let mut error = 0.0f64;
     for &p in &pts[1..] {
@@ -328,17 +324,15 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
     for &(kind, i, j) in &spans {
         match kind {
             Kind::Line => out.push(Piece { error: line_error(&pts[i..=j]), ..piece(Kind::Line, i, j) }),
-            Kind::Arc => {
-                let (centre, axis, r, sweep, error) = arc_fit(&pts[i..=j], tol).expect("a settled arc holds");
-                out.push(Piece {
-                    centre: Some(centre),
-                    axis: Some(axis),
-                    radius: Some(r),
-                    sweep_deg: Some(sweep.to_degrees()),
-                    error,
-                    ..piece(Kind::Arc, i, j)
-                });
-            }
+            // (Every arc span was checked to hold where it was made or moved.)
+            Kind::Arc if let Some((centre, axis, r, sweep, error)) = arc_fit(&pts[i..=j], tol) => out.push(Piece {
+                centre: Some(centre),
+                axis: Some(axis),
+                radius: Some(r),
+                sweep_deg: Some(sweep.to_degrees()),
+                error,
+                ..piece(Kind::Arc, i, j)
+            }),
             _ if j - i == 1 => out.push(Piece { error: line_error(&pts[i..=j]), ..piece(Kind::Line, i, j) }),
             _ => match spline::fit(&pts[i..=j], tol, MAX_CONTROL_POINTS) {
                 Some((s, error)) => out.push(Piece { spline: Some(s), error, ..piece(Kind::Spline, i, j) }),
