@@ -653,6 +653,22 @@ mod tests {
     }
 
     #[test]
+    fn an_arc_ends_where_its_tangent_line_begins_however_loose_the_tolerance() {
+        // A quarter circle of radius 1 in steps of 6 degrees, then its tangent line in steps of
+        // 0.1. At a tolerance of 0.03 the arc drawn on from its start takes in the line's first
+        // steps too; the joint is settled back to the tangent point, where both fit exactly.
+        let mut pts: Vec<DVec3> = (0..=15).map(|k| k as f64 * TAU / 60.0).map(|t| DVec3::new(t.sin(), 1.0 - t.cos(), 0.0)).collect();
+        pts.extend((1..=20).map(|k| DVec3::new(1.0, 1.0 + 0.1 * k as f64, 0.0)));
+        let pl = polyline(pts, false);
+        let pieces = pieces(&pl, 0.03);
+        let kinds: Vec<Kind> = pieces.iter().map(|p| p.kind).collect();
+        assert_eq!(kinds, [Kind::Arc, Kind::Line]);
+        assert_eq!(pieces[0].segments, 15, "the arc ends {} steps from the tangent point", pieces[0].segments as i64 - 15);
+        assert!((pieces[0].sweep_deg.unwrap() - 90.0).abs() < 1e-9 && (pieces[0].radius.unwrap() - 1.0).abs() < 1e-9);
+        check(&pl, &pieces, 0.03);
+    }
+
+    #[test]
     fn corners_split_pieces_and_are_shared() {
         // A square's outline with its four corners flagged.
         let mut pts = Vec::new();
