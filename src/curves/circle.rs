@@ -1,8 +1,8 @@
-//! The least-squares circle of a closed curve's vertices, through its first vertex. A circle
-//! through three vertices carries the noise of those three into its centre and radius; one
-//! fitted over every vertex averages it away, so it holds within the tolerance where the
-//! three-vertex one breaks. It keeps one vertex on it so that the piece, like every other, starts
-//! and ends on a vertex of its curve.
+//! Least-squares circles of a curve's vertices: a closed curve's, through its first vertex, and
+//! an arc's, through both its end vertices. A circle through three vertices carries the noise of
+//! those three into its centre and radius; one fitted over every vertex averages it away, so it
+//! holds within the tolerance where the three-vertex one breaks. It keeps the end vertices on it
+//! so that the piece, like every other, starts and ends on a vertex of its curve.
 
 use glam::{DVec2, DVec3};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
@@ -47,6 +47,53 @@ pub(crate) fn fit_circle(pts: &[DVec3]) -> Option<(DVec3, DVec3, f64)> {
     }
     let centre = o + c.x * u + c.y * w;
     Some((centre, oriented(n, centre, o, pts[pts.len() / 3]), c.length()))
+}
+
+/// The circle through the end points of `pts` nearest the others in the least-squares sense
+/// (within the plane through both ends that they lie closest to): (centre, unit axis, radius),
+/// the axis turning from the first point towards the middle one counterclockwise. None where the
+/// points are (nearly) on one line or the ends coincide.
+pub(crate) fn fit_arc(pts: &[DVec3]) -> Option<(DVec3, DVec3, f64)> {
+    let (a, b) = (pts[0], *pts.last()?);
+    let chord = (b - a).normalize_or_zero();
+    let n = plane_through(a, pts)?;
+    let n = (n - n.dot(chord) * chord).normalize_or_zero();
+    if chord == DVec3::ZERO || n == DVec3::ZERO {
+        return None;
+    }
+    // In the plane, about the chord's middle: the ends at (-h, 0) and (h, 0), the centre at
+    // (0, s) on the chord's bisector, the radius the hypotenuse of h and s.
+    let (mid, w, h) = (0.5 * (a + b), n.cross(chord), 0.5 * a.distance(b));
+    let flat: Vec<DVec2> = pts.iter().map(|&p| p - mid).map(|d| DVec2::new(d.dot(chord), d.dot(w))).collect();
+    let m = flat[flat.len() / 2];
+    let mut s = (m.length_squared() - h * h) / (2.0 * m.y);
+    if !s.is_finite() {
+        return None;
+    }
+    for _ in 0..MAX_STEPS {
+        let r = s.hypot(h);
+        // Normal equations of the residuals |q - (0, s)| - r in s.
+        let (mut jtj, mut jtr) = (0.0, 0.0);
+        for &q in &flat {
+            let len = q.distance(DVec2::new(0.0, s));
+            if len == 0.0 {
+                return None;
+            }
+            let j = -(q.y - s) / len - s / r;
+            jtj += j * j;
+            jtr += j * (len - r);
+        }
+        let step = jtr / jtj;
+        s -= step;
+        if !s.is_finite() {
+            return None;
+        }
+        if step.abs() <= 1e-12 * r {
+            break;
+        }
+    }
+    let centre = mid + s * w;
+    Some((centre, oriented(n, centre, a, pts[pts.len() / 2]), s.hypot(h)))
 }
 
 /// The unit normal of the plane through `o` that `pts` lie closest to.
@@ -114,8 +161,25 @@ mod tests {
     }
 
     #[test]
+    fn a_wobbly_arc_gives_its_circle_through_its_ends() {
+        let c = DVec3::new(1.0, -2.0, 3.0);
+        // (An even count of steps: both ends sit a wobble out, and the circle through them keeps
+        // every vertex within two wobbles, where the circle through the ends and the middle
+        // vertex, all three out, misses the vertices in by more.)
+        for (from, to) in [(0.0, 2.0), (0.5, 5.0)] {
+            let pts = ring(c, 5.0, from, to, 40, 0.05);
+            let (centre, axis, r) = fit_arc(&pts).unwrap();
+            assert!((pts[0].distance(centre) - r).abs() < 1e-12 && (pts[40].distance(centre) - r).abs() < 1e-12);
+            let off = |centre: DVec3, r: f64| pts.iter().map(|p| (p.distance(centre) - r).abs()).fold(0.0, f64::max);
+            assert!(off(centre, r) < 0.1, "{from}..{to}: {}", off(centre, r));
+            assert!(axis.z > 0.99, "{axis}");
+        }
+    }
+
+    #[test]
     fn collinear_points_have_no_circle() {
         let pts: Vec<DVec3> = (0..10).map(|i| DVec3::new(i as f64, 2.0 * i as f64, 0.0)).collect();
         assert!(fit_circle(&pts).is_none());
+        assert!(fit_arc(&pts).is_none());
     }
 }

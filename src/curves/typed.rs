@@ -130,12 +130,24 @@ fn line_error(pts: &[DVec3]) -> f64 {
 /// (The least-squares circle through the ends bends to take in the start of a tangent line, so
 /// the pieces cut with it stray from their joints.)
 fn arc_fit(pts: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64, f64)> {
-    let m = pts.len();
-    if m < 4 {
+    if pts.len() < 4 {
         return None;
     }
-    let (a, b) = (pts[0], pts[m - 1]);
-    let (centre, axis, r) = circle_through(a, pts[m / 2], b)?;
+    let (centre, axis, r) = circle_through(pts[0], pts[pts.len() / 2], pts[pts.len() - 1])?;
+    follows(pts, (centre, axis, r), tol)
+}
+
+/// The arc that [`arc_fit`] gives, or else the least-squares one through the ends, where that
+/// holds: for two arcs already cut, whose joint is no tangent line's start.
+fn joined_arc_fit(pts: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64, f64)> {
+    arc_fit(pts, tol).or_else(|| follows(pts, super::circle::fit_arc(pts)?, tol))
+}
+
+/// `circle` (centre, axis, radius) as the arc of `pts`, if every vertex lies within `tol` of it
+/// and they follow it in order from the first: with the sweep in radians and the error.
+fn follows(pts: &[DVec3], circle: (DVec3, DVec3, f64), tol: f64) -> Option<(DVec3, DVec3, f64, f64, f64)> {
+    let (centre, axis, r) = circle;
+    let (a, b) = (pts[0], pts[pts.len() - 1]);
     let mut last = 0.0;
     let mut error = 0.0f64;
     for &p in &pts[1..] {
@@ -324,8 +336,8 @@ fn type_run(curve: u32, run: &[usize], v: &[DVec3], tol: f64, out: &mut Vec<Piec
     for &(kind, i, j) in &spans {
         match kind {
             Kind::Line => out.push(Piece { error: line_error(&pts[i..=j]), ..piece(Kind::Line, i, j) }),
-            // (Every arc span was checked to hold where it was made or moved.)
-            Kind::Arc if let Some((centre, axis, r, sweep, error)) = arc_fit(&pts[i..=j], tol) => out.push(Piece {
+            // (Every arc span was checked to hold where it was made, moved or joined.)
+            Kind::Arc if let Some((centre, axis, r, sweep, error)) = joined_arc_fit(&pts[i..=j], tol) => out.push(Piece {
                 centre: Some(centre),
                 axis: Some(axis),
                 radius: Some(r),
@@ -389,7 +401,13 @@ fn greedy_spans(pts: &[DVec3], tol: f64) -> Vec<Span> {
 /// that bows less cannot be told from a line at that tolerance, and the line, the simpler
 /// type, is taken.
 fn arc_holds(pts: &[DVec3], tol: f64) -> Option<f64> {
-    let (centre, axis, r, sweep, _) = arc_fit(pts, tol)?;
+    arc_sse(pts, arc_fit(pts, tol)?, tol)
+}
+
+/// The sum of squared distances of `pts` from `arc` (centre, axis, radius, sweep, error) if it
+/// bows out from its chord by more than twice `tol` (see [`arc_holds`]).
+fn arc_sse(pts: &[DVec3], arc: (DVec3, DVec3, f64, f64, f64), tol: f64) -> Option<f64> {
+    let (centre, axis, r, sweep, _) = arc;
     let bows = r * (1.0 - (0.5 * sweep.min(std::f64::consts::PI)).cos()) > 2.0 * tol;
     bows.then(|| pts.iter().map(|&p| off_circle(p, centre, axis, r).powi(2)).sum())
 }
@@ -412,14 +430,15 @@ fn line_holds(pts: &[DVec3], tol: f64) -> Option<f64> {
 /// Joins each two neighbouring lines, or arcs, into one where that one holds over both: the
 /// greedy pass ends an arc where the circle through its ends and middle stops holding, which a
 /// noisy middle vertex can make happen half way round, and the next arc then goes on round
-/// the same circle.
+/// the same circle. (Two arcs are also one where only the least-squares circle through their
+/// ends holds: that circle averages the noise of the middle vertex away.)
 fn join_alike(spans: &mut Vec<Span>, pts: &[DVec3], tol: f64) {
     let mut s = 1;
     while s < spans.len() {
         let ((pk, a, _), (qk, _, b)) = (spans[s - 1], spans[s]);
         let holds = match (pk, qk) {
             (Kind::Line, Kind::Line) => line_holds(&pts[a..=b], tol).is_some(),
-            (Kind::Arc, Kind::Arc) => arc_holds(&pts[a..=b], tol).is_some(),
+            (Kind::Arc, Kind::Arc) => joined_arc_fit(&pts[a..=b], tol).and_then(|arc| arc_sse(&pts[a..=b], arc, tol)).is_some(),
             _ => false,
         };
         if holds {
