@@ -46,6 +46,13 @@ impl Drop for PeakSampler {
     }
 }
 
+/// `work`'s result and the peak resident set size while it ran, bytes (see [`PeakSampler`]).
+pub(crate) fn sampled<T>(work: impl FnOnce() -> T) -> (T, u64) {
+    let sampler = PeakSampler::start();
+    let out = work();
+    (out, sampler.finish())
+}
+
 /// Current resident set size in bytes (VmRSS), or 0 where unavailable.
 pub(crate) fn current_rss() -> u64 {
     status_kib("VmRSS:") * 1024

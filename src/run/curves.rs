@@ -15,11 +15,13 @@ use crate::extract::{Counts, Resolved, Timings};
 use std::time::Instant;
 
 /// What the curve stage hands on: the number of batches of finished curves it wrote (see
-/// `Run::finished_curves`), the counts of every stage, and the seconds of each.
+/// `Run::finished_curves`), the counts of every stage, the seconds of each, and its peak
+/// resident memory (bytes).
 pub(super) struct CurveStage {
     pub(super) batches: u32,
     pub(super) counts: Counts,
     pub(super) seconds: Timings,
+    pub(super) peak_rss: u64,
 }
 
 impl Run<'_> {
@@ -40,7 +42,7 @@ impl Run<'_> {
     pub(super) fn curves(&mut self, r: &Resolved, outside: &Outside) -> Result<Step<CurveStage>> {
         let t = Instant::now();
         crate::mem::release_free_memory();
-        self.curve_peak = Some(crate::mem::PeakSampler::start());
+        let peak = crate::mem::PeakSampler::start();
         let survey = self.survey(r)?;
         let mut seconds = Timings { candidates: self.pass.residuals, projection: self.pass.projection, index: self.pass.statistics, ..Default::default() };
         self.grow_blocks(&survey, r, &mut seconds)?;
@@ -68,6 +70,6 @@ impl Run<'_> {
         crate::mem::release_free_memory();
         seconds.completion = tc.elapsed().as_secs_f64();
         self.pass.curves = t.elapsed().as_secs_f64();
-        Ok(Step::Done(CurveStage { batches, counts, seconds }))
+        Ok(Step::Done(CurveStage { batches, counts, seconds, peak_rss: peak.finish() }))
     }
 }

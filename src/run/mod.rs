@@ -198,8 +198,11 @@ fn extract_files(mut run: Run, mut found: InputFiles, params: &Params, filter: &
     let outside = found.outside(run.opts);
     let stage = done!(run.curves(&r, &outside)?);
     found.warnings.extend(clusters_cut_warning(&stage.counts));
-    let shapes = run.write(stage.batches, &found.crs, &r)?;
-    run.labels = run.label_points(stage.batches, &r, &found.files, filter.text)?;
+    let (shapes, peak) = crate::mem::sampled(|| run.write(stage.batches, &found.crs, &r));
+    run.peak_rss_outputs = peak;
+    let shapes = shapes?;
+    let (labels, peak) = crate::mem::sampled(|| run.label_points(stage.batches, &r, &found.files, filter.text));
+    (run.peak_rss_labels, run.labels) = (peak, labels?);
     found.warn_coarse_coordinates(&run.manifest.grid, r.kappa);
     let report = report(&mut run, found, r, stage, outside, shapes);
     run.ws.write_atomic("report.json", serde_json::to_string_pretty(&report).expect("report serialises").as_bytes())?;
@@ -232,7 +235,7 @@ fn clusters_cut_warning(counts: &Counts) -> Option<String> {
 
 /// The report of a finished run, from what its steps found.
 fn report(run: &mut Run, found: InputFiles, r: Resolved, stage: CurveStage, outside: Outside, shapes: ShapeCounts) -> Report {
-    let CurveStage { counts, seconds, .. } = stage;
+    let CurveStage { counts, seconds, peak_rss, .. } = stage;
     let grid = &run.manifest.grid;
     Report {
         version: env!("CARGO_PKG_VERSION").to_string(),
@@ -249,7 +252,9 @@ fn report(run: &mut Run, found: InputFiles, r: Resolved, stage: CurveStage, outs
         total_seconds: run.started.elapsed().as_secs_f64(),
         peak_rss_bytes: crate::mem::peak_rss(),
         peak_rss_tiles_bytes: run.peak_rss_tiles,
-        peak_rss_curves_bytes: run.curve_peak.take().map_or(0, |s| s.finish()),
+        peak_rss_curves_bytes: peak_rss,
+        peak_rss_outputs_bytes: run.peak_rss_outputs,
+        peak_rss_labels_bytes: run.peak_rss_labels,
         threads: rayon::current_num_threads(),
         tiles: grid.len(),
         tile_size: grid.size,
@@ -311,7 +316,7 @@ pub fn extract_cloud(points: &[DVec3], params: &Params, opts: &RunOptions) -> Re
     let r = run.tile_passes(&Input::Points(points), params, &here)?.lone()?;
     // (Points in memory give no scanner positions: only `outside` tells the shapes.)
     let outside = opts.outside.clone().unwrap_or_default();
-    let CurveStage { batches, counts, seconds } = run.curves(&r, &outside)?.lone()?;
+    let CurveStage { batches, counts, seconds, .. } = run.curves(&r, &outside)?.lone()?;
     let (finished, mut curves) = (run.finished_curves(batches), vec![]);
     finished.each(&mut |c| {
         curves.push(c.clone());

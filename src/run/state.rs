@@ -69,8 +69,9 @@ pub(super) struct Run<'a> {
     pub(super) evaluated: u64,
     /// Peak memory by the end of the tile passes.
     pub(super) peak_rss_tiles: u64,
-    /// Samples the memory of the curve stage, from its start to the report.
-    pub(super) curve_peak: Option<crate::mem::PeakSampler>,
+    /// Peak memory while the outputs were written, and while the points were labelled.
+    pub(super) peak_rss_outputs: u64,
+    pub(super) peak_rss_labels: u64,
     /// Damaged results removed to be computed again.
     pub(super) repaired: Vec<PathBuf>,
     /// This process's share of a run that several share.
@@ -105,7 +106,8 @@ impl<'a> Run<'a> {
             tau: 0.0,
             evaluated: 0,
             peak_rss_tiles: 0,
-            curve_peak: None,
+            peak_rss_outputs: 0,
+            peak_rss_labels: 0,
             repaired: vec![],
             worker,
             labels: vec![],

@@ -208,9 +208,14 @@ pub struct Report {
     pub peak_rss_bytes: u64,
     /// Peak resident memory of this invocation up to the end of the tile passes, bytes.
     pub peak_rss_tiles_bytes: u64,
-    /// Peak resident memory during the curve stage (stages 3-5 and the outputs), bytes, as
-    /// sampled every few milliseconds (see `crate::mem::PeakSampler`).
+    /// Peak resident memory during the curve stage (stages 3-5), bytes, as sampled every few
+    /// milliseconds (see `crate::mem::PeakSampler`).
     pub peak_rss_curves_bytes: u64,
+    /// Peak resident memory while the outputs were written, bytes, sampled the same way.
+    pub peak_rss_outputs_bytes: u64,
+    /// Peak resident memory while the points were labelled (`--label-points`; 0 without),
+    /// bytes, sampled the same way.
+    pub peak_rss_labels_bytes: u64,
     /// Worker threads.
     pub threads: usize,
     /// Tiles in the grid.
