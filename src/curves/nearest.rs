@@ -13,9 +13,9 @@ use crate::error::Result;
 use crate::spatial::Index;
 use glam::DVec3;
 
-/// Most samples the index holds: a cloud's curves rarely need a tenth of this at one sample a
-/// tolerance; longer curves are sampled more coarsely.
-const MAX_SAMPLES: f64 = 2e7;
+/// Bytes a sample takes while the index is built: its position, its segment's number, and the
+/// tree's own copy of both with the builder's scratch.
+const SAMPLE_BYTES: u64 = 40;
 
 /// A segment of a curve.
 #[derive(Clone, Copy, Debug)]
@@ -46,8 +46,21 @@ pub struct NearestCurve {
 }
 
 impl NearestCurve {
-    /// Indexes `curves`, sampled about `h` apart (more coarsely for very long curves).
-    pub fn new(curves: &(impl Curves + ?Sized), h: f64) -> Result<NearestCurve> {
+    /// Indexes `curves`, sampled about `h` apart, or more coarsely where that would take more
+    /// than `bytes` of memory with the segments. (Any spacing gives the same answers: a coarser
+    /// one only makes a query look at more segments.)
+    ///
+    /// ```
+    /// use crease::curves::{nearest::NearestCurve, Polyline};
+    /// use glam::DVec3;
+    ///
+    /// let curves = vec![Polyline::from_points(4, [DVec3::ZERO, DVec3::X])];
+    /// let index = NearestCurve::new(&curves, 0.01, 1 << 20)?;
+    /// let (distance, id) = index.nearest(DVec3::new(0.5, 2.0, 0.0), &mut vec![]).unwrap();
+    /// assert_eq!((distance, id), (2.0, 4));
+    /// # Ok::<(), crease::Error>(())
+    /// ```
+    pub fn new(curves: &(impl Curves + ?Sized), h: f64, bytes: u64) -> Result<NearestCurve> {
         let mut segments = vec![];
         curves.each(&mut |c: &Polyline| {
             segments.extend(c.segments().map(|(a, b)| Segment { a, b, curve: c.id }));
@@ -58,7 +71,11 @@ impl NearestCurve {
             Ok(())
         })?;
         let total: f64 = segments.iter().map(|s| s.a.distance(s.b)).sum();
-        let h = h.max(total / MAX_SAMPLES).max(f64::MIN_POSITIVE);
+        // (Each segment takes its two ends whatever the spacing; the rest of the memory goes to
+        // samples between them.)
+        let held = segments.len() as u64 * (std::mem::size_of::<Segment>() as u64 + 2 * SAMPLE_BYTES);
+        let between = (bytes.saturating_sub(held) / SAMPLE_BYTES).max(1) as f64;
+        let h = h.max(total / between).max(f64::MIN_POSITIVE);
         let origin = segments.iter().map(|s| s.a).reduce(DVec3::min).unwrap_or_default();
         let (mut samples, mut sample_segment) = (vec![], vec![]);
         for (k, s) in segments.iter().enumerate() {
@@ -70,6 +87,7 @@ impl NearestCurve {
         }
         let extent = samples.iter().flatten().fold(0f32, |m, v| m.max(v.abs())) as f64;
         let tree = (!samples.is_empty()).then(|| Index::new_parallel(&samples));
+        drop(samples);
         Ok(NearestCurve { segments, sample_segment, tree, origin, h, extent })
     }
 
@@ -123,13 +141,22 @@ impl NearestCurve {
 mod tests {
     use super::*;
 
-    /// The index answers what a search of every segment answers, ties to the lower id.
+    /// The index answers what a search of every segment answers, ties to the lower id, whether
+    /// it may sample the curves finely or is left only their segments' ends.
     #[test]
     fn nearest_is_the_brute_force_answer() {
+        for bytes in [1 << 20, 0] {
+            nearest_is_the_brute_force_answer_in(bytes);
+        }
+    }
+
+    fn nearest_is_the_brute_force_answer_in(bytes: u64) {
         let a = Polyline::from_points(3, [DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0)]);
         let b = Polyline::from_points(7, [DVec3::new(0.0, 0.5, 0.0), DVec3::new(0.0, 0.5, 2.0)]);
         let curves = vec![a, b];
-        let n = NearestCurve::new(&curves, 0.05).unwrap();
+        let n = NearestCurve::new(&curves, 0.05, bytes).unwrap();
+        // (The fine index holds the samples 0.05 apart, the coarse one little more than the ends.)
+        assert!(if bytes > 0 { n.sample_segment.len() > 60 } else { n.sample_segment.len() <= 8 }, "{}", n.sample_segment.len());
         let mut scratch = vec![];
         let mut rng = 12345u64;
         let mut next = || {
@@ -146,7 +173,7 @@ mod tests {
         }
         // (Equally near both: the lower id.)
         assert_eq!(n.nearest(DVec3::new(0.0, 0.25, 0.0), &mut scratch).map(|x| x.1), Some(3));
-        assert!(NearestCurve::new(&Vec::<Polyline>::new(), 0.1).unwrap().nearest(q0(), &mut scratch).is_none());
+        assert!(NearestCurve::new(&Vec::<Polyline>::new(), 0.1, 1 << 20).unwrap().nearest(q0(), &mut scratch).is_none());
     }
 
     fn q0() -> DVec3 {

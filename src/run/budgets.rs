@@ -31,6 +31,13 @@ const EDGE_POINT_BYTES: u64 = 48;
 /// the index of the ends and the copies completion makes).
 const COMPLETED_VERTEX_BYTES: u64 = 140;
 
+/// Bytes the label pass's index of the curves may take (see
+/// [`crate::curves::nearest::NearestCurve`]): half the budget, the other half holding a chunk of
+/// points in flight and the compressor.
+pub(super) fn label_index(memory: u64) -> u64 {
+    memory / 2
+}
+
 /// Points the bucketer buffers before it appends them to the tile store: a quarter of the
 /// budget, the rest being the readers' and the compressors'.
 pub(super) fn bucket_buffer(memory: u64) -> usize {

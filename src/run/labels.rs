@@ -59,7 +59,7 @@ impl Run<'_> {
         }
         let t = std::time::Instant::now();
         let tolerance = typed::tolerance(r.kappa, r.noise);
-        let nearest = NearestCurve::new(&self.finished_curves(batches), tolerance)?;
+        let nearest = NearestCurve::new(&self.finished_curves(batches), tolerance, super::budgets::label_index(self.opts.memory))?;
         let reach = r.halo().max(tolerance);
         let key = format!("{} {tolerance:e} {reach:e}\n", nearest.fingerprint());
         prepare_dir(&dir, &key)?;
