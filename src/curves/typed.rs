@@ -133,8 +133,7 @@ fn arc_fit(pts: &[DVec3], tol: f64) -> Option<(DVec3, DVec3, f64, f64, f64)> {
     if pts.len() < 4 {
         return None;
     }
-    let (centre, axis, r) = circle_through(pts[0], pts[pts.len() / 2], pts[pts.len() - 1])?;
-    follows(pts, (centre, axis, r), tol)
+    follows(pts, circle_through(pts[0], pts[pts.len() / 2], pts[pts.len() - 1])?, tol)
 }
 
 /// The arc that [`arc_fit`] gives, or else the least-squares one through the ends, where that
@@ -401,15 +400,14 @@ fn greedy_spans(pts: &[DVec3], tol: f64) -> Vec<Span> {
 /// that bows less cannot be told from a line at that tolerance, and the line, the simpler
 /// type, is taken.
 fn arc_holds(pts: &[DVec3], tol: f64) -> Option<f64> {
-    arc_sse(pts, arc_fit(pts, tol)?, tol)
+    let arc @ (centre, axis, r, _, _) = arc_fit(pts, tol)?;
+    bows(arc, tol).then(|| pts.iter().map(|&p| off_circle(p, centre, axis, r).powi(2)).sum())
 }
 
-/// The sum of squared distances of `pts` from `arc` (centre, axis, radius, sweep, error) if it
-/// bows out from its chord by more than twice `tol` (see [`arc_holds`]).
-fn arc_sse(pts: &[DVec3], arc: (DVec3, DVec3, f64, f64, f64), tol: f64) -> Option<f64> {
-    let (centre, axis, r, sweep, _) = arc;
-    let bows = r * (1.0 - (0.5 * sweep.min(std::f64::consts::PI)).cos()) > 2.0 * tol;
-    bows.then(|| pts.iter().map(|&p| off_circle(p, centre, axis, r).powi(2)).sum())
+/// True if `arc` (centre, axis, radius, sweep, error) bows out from its chord by more than twice
+/// `tol` (see [`arc_holds`]).
+fn bows((_, _, r, sweep, _): (DVec3, DVec3, f64, f64, f64), tol: f64) -> bool {
+    r * (1.0 - (0.5 * sweep.min(std::f64::consts::PI)).cos()) > 2.0 * tol
 }
 
 /// The sum of squared distances of `pts` from the segment between their ends, if every one
@@ -438,7 +436,7 @@ fn join_alike(spans: &mut Vec<Span>, pts: &[DVec3], tol: f64) {
         let ((pk, a, _), (qk, _, b)) = (spans[s - 1], spans[s]);
         let holds = match (pk, qk) {
             (Kind::Line, Kind::Line) => line_holds(&pts[a..=b], tol).is_some(),
-            (Kind::Arc, Kind::Arc) => joined_arc_fit(&pts[a..=b], tol).and_then(|arc| arc_sse(&pts[a..=b], arc, tol)).is_some(),
+            (Kind::Arc, Kind::Arc) => joined_arc_fit(&pts[a..=b], tol).is_some_and(|arc| bows(arc, tol)),
             _ => false,
         };
         if holds {
